@@ -1,0 +1,1 @@
+"""taichimyxo.render: off-screen movies from Frames (no display, no GPU)."""

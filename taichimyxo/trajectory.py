@@ -1,0 +1,168 @@
+"""Trajectories in the GSD file format with the HOOMD schema (readable by OVITO, HOOMD-blue, freud, MDAnalysis).
+
+Schema (see README "Trajectory format"):
+- configuration.box = [Lx, Ly, 1, 0, 0, 0] µm, dimensions = 2, step = integration step.
+- particles.position (Np, 3) float32: HOOMD convention, box centred at the origin, positions in [-L/2, L/2);
+  particles.image (Np, 3) int32 so that position + image * L gives every cell's chain unwrapped.
+  Particles are stored cell by cell: particle i belongs to cell i // N and is number i % N along it.
+  particles.types = ["pole", "body"]: the two end particles of each cell are "pole".
+- bonds.group (Nb, 2): the segments, (i, i+1) within each cell; bonds.types = ["segment"].
+- log/particles/speed_um_per_min (Np,) float32: particle speed averaged over the speed window (MODEL.md).
+- log/particles/engine_direction (Np,) int8: the cell's k_e (+1: particle 0 of the cell is the head).
+- log/bonds/strain_energy_J (Nb,) float32: per-segment strain energy, only when the scene asks for it.
+- log/taichimyxo/time_s (1,) float64: simulated time, s.
+- log/taichimyxo/scene_json (frame 0 only): the fully resolved scene as UTF-8 JSON bytes (uint8 array).
+"""
+from __future__ import annotations
+
+import json
+import os
+from typing import Iterator
+
+import numpy as np
+
+from .frame import Frame, unwrap_chains
+
+SCHEMA_VERSION = 1
+
+
+def _gsd():
+    import gsd.hoomd
+    return gsd.hoomd
+
+
+class TrajectoryWriter:
+    """Append Frames to a GSD file. Opened lazily on the first frame; `close()` leaves a readable file.
+
+    mode "w" truncates; mode "a" appends (used by --resume)."""
+
+    def __init__(self, path: str, scene_dict: dict | None = None, mode: str = "w"):
+        self.path = path
+        self.scene_dict = scene_dict or {}
+        self.mode = mode
+        self._f = None
+        self._first = True
+        self.frames_written = 0
+
+    def _open(self):
+        hoomd = _gsd()
+        if self.mode == "a" and os.path.exists(self.path):
+            self._f = hoomd.open(self.path, "a")
+            self._first = False
+        else:
+            self._f = hoomd.open(self.path, "w")
+
+    def append(self, fr: Frame) -> None:
+        if self._f is None:
+            self._open()
+        hoomd = _gsd()
+        n_cells, N = fr.positions.shape[:2]
+        Np = n_cells * N
+        L = np.array(fr.box, dtype=np.float64)
+        p = fr.positions.reshape(Np, 2).astype(np.float64) - L / 2
+        img = np.floor((p + L / 2) / L).astype(np.int32)
+        wrapped = p - img * L
+        g = hoomd.Frame()
+        g.configuration.box = [float(L[0]), float(L[1]), 1.0, 0.0, 0.0, 0.0]
+        g.configuration.dimensions = 2
+        g.configuration.step = int(fr.step)
+        g.particles.N = Np
+        pos3 = np.zeros((Np, 3), np.float32)
+        pos3[:, :2] = wrapped
+        g.particles.position = pos3
+        im3 = np.zeros((Np, 3), np.int32)
+        im3[:, :2] = img
+        g.particles.image = im3
+        g.particles.types = ["pole", "body"]
+        tid = np.ones((n_cells, N), np.uint32)
+        tid[:, 0] = 0
+        tid[:, -1] = 0
+        g.particles.typeid = tid.reshape(-1)
+        g.particles.diameter = np.full(Np, fr.width_um, np.float32)
+        if self._first:
+            nb = n_cells * (N - 1)
+            base = (np.arange(n_cells) * N)[:, None] + np.arange(N - 1)[None, :]
+            grp = np.stack([base.reshape(-1), base.reshape(-1) + 1], axis=1).astype(np.uint32)
+            g.bonds.N = nb
+            g.bonds.types = ["segment"]
+            g.bonds.typeid = np.zeros(nb, np.uint32)
+            g.bonds.group = grp
+            meta = dict(self.scene_dict)
+            meta.setdefault("_schema_version", SCHEMA_VERSION)
+            meta.setdefault("_width_um", fr.width_um)
+            g.log["taichimyxo/scene_json"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8).copy()
+        g.log["particles/speed_um_per_min"] = np.asarray(fr.particle_speed, np.float32).reshape(Np)
+        g.log["particles/engine_direction"] = np.repeat(np.asarray(fr.engine_direction, np.int8), N)
+        if fr.segment_strain is not None:
+            g.log["bonds/strain_energy_J"] = np.asarray(fr.segment_strain, np.float32).reshape(-1)
+        g.log["taichimyxo/time_s"] = np.array([fr.time_s], np.float64)
+        self._f.append(g)
+        self._f.flush()
+        self._first = False
+        self.frames_written += 1
+
+    def close(self) -> None:
+        if self._f is not None:
+            self._f.close()
+            self._f = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def read_scene(path: str) -> dict:
+    """The resolved scene stored in frame 0 (empty dict for foreign GSD files)."""
+    with _gsd().open(path, "r") as t:
+        if len(t) == 0:
+            return {}
+        f0 = t[0]
+        raw = f0.log.get("taichimyxo/scene_json")
+        return json.loads(bytes(np.asarray(raw, np.uint8)).decode()) if raw is not None else {}
+
+
+def _frame_from_gsd(g, N: int, width: float, meta: dict) -> Frame:
+    L = np.array(g.configuration.box[:2], dtype=np.float64)
+    Np = int(g.particles.N)
+    pos = g.particles.position[:, :2].astype(np.float64) + g.particles.image[:, :2] * L + L / 2
+    n_cells = Np // N
+    pos = unwrap_chains(pos.reshape(n_cells, N, 2), L)
+    spd = g.log.get("particles/speed_um_per_min")
+    spd = np.zeros((n_cells, N), np.float32) if spd is None else np.asarray(spd, np.float32).reshape(n_cells, N)
+    ke = g.log.get("particles/engine_direction")
+    ke = np.ones(n_cells, np.int8) if ke is None else np.asarray(ke, np.int8).reshape(n_cells, N)[:, 0].copy()
+    st = g.log.get("bonds/strain_energy_J")
+    st = None if st is None else np.asarray(st, np.float64).reshape(n_cells, N - 1)
+    t = g.log.get("taichimyxo/time_s")
+    t = float(np.asarray(t).reshape(-1)[0]) if t is not None else float(g.configuration.step)
+    return Frame(time_s=t, step=int(g.configuration.step), box=(float(L[0]), float(L[1])), width_um=width,
+                 positions=pos, engine_direction=ke, particle_speed=spd, segment_strain=st, meta=meta)
+
+
+def count_frames(path: str) -> int:
+    with _gsd().open(path, "r") as t:
+        return len(t)
+
+
+def read_frames(path: str, every: int = 1, start: int = 0) -> Iterator[Frame]:
+    """Yield the Frames of a GSD trajectory (ours, or any HOOMD-schema file of linear chains of equal length,
+    given `particles_per_cell` in the stored scene)."""
+    meta = read_scene(path)
+    with _gsd().open(path, "r") as t:
+        if len(t) == 0:
+            return
+        N = int(meta.get("cell", {}).get("particles", 0)) or _guess_chain_length(t[0])
+        width = float(meta.get("_width_um", meta.get("cell", {}).get("width_um", 0.5)))
+        for i in range(start, len(t), max(1, every)):
+            yield _frame_from_gsd(t[i], N, width, meta)
+
+
+def _guess_chain_length(g) -> int:
+    grp = np.asarray(g.bonds.group)
+    if len(grp) == 0:
+        return 1
+    # chains are consecutive; a chain ends where the next bond does not start at the previous bond's end
+    breaks = np.nonzero(grp[1:, 0] != grp[:-1, 1])[0]
+    return int(breaks[0] + 2) if len(breaks) else int(g.particles.N)
