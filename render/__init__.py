@@ -1,1 +1,66 @@
-"""taichimyxo.render: off-screen movies from Frames (no display, no GPU)."""
+"""taichimyxo.render: off-screen movies and figure panels from Frames (no display, no GPU, no Taichi).
+
+- :func:`render_frame` — one Frame → RGB image (H, W, 3) uint8: cells as capsules, each segment coloured by its speed
+  (linear 0–16 µm/min) or strain energy (log10, 1e-20–1e-16 J), colormap ``turbo`` (a perceptual ``jet``), white
+  background, colour bar with units, time (h:mm) and scale bar at the bottom.
+- :class:`VideoWriter` — Frames → MP4 (H.264, yuv420p), checked after close.
+- :func:`write_png` — one Frame → PNG figure panel.
+- :func:`render_trajectory` — a GSD trajectory (taichimyxo.trajectory) → MP4, without simulating.
+"""
+from __future__ import annotations
+
+import math
+import os
+
+from .colors import ColorScale, speed_scale, strain_scale
+from .raster import Layout, Renderer, Viewport, compute_layout, get_renderer, render_frame
+from .video import PNG_SIZE, VideoWriteError, VideoWriter, verify_video, write_png
+
+__all__ = ["render_frame", "VideoWriter", "write_png", "render_trajectory", "Renderer", "Viewport", "Layout",
+           "ColorScale", "speed_scale", "strain_scale", "compute_layout", "get_renderer", "verify_video",
+           "VideoWriteError"]
+
+
+def render_trajectory(gsd_path, out_path, color="speed", size=(1920, 1080), fps=30, every=1, png_path=None,
+                      progress=True, png_size=PNG_SIZE, **options) -> int:
+    """Render the GSD trajectory ``gsd_path`` to the MP4 ``out_path`` (no simulation). Returns the frame count.
+
+    every: use every n-th stored frame. png_path: also write the last rendered frame as a PNG figure panel of
+    ``png_size`` (same colours). options: VideoWriter / Renderer options (crf, preset, background, vmax, strain_range, …).
+    Raises ValueError if ``color="strain"`` and the trajectory has no strain energy logged."""
+    from taichimyxo.trajectory import count_frames, read_frames
+
+    gsd_path, out_path = os.fspath(gsd_path), os.fspath(out_path)
+    every = max(1, int(every))
+    total = count_frames(gsd_path)
+    if total == 0:
+        raise ValueError(f"{gsd_path}: the trajectory has no frames")
+    frames = read_frames(gsd_path, every=every)
+    bar = None
+    if progress:
+        try:
+            from tqdm import tqdm
+            bar = tqdm(total=math.ceil(total / every), unit="frame", desc=f"render {os.path.basename(out_path)}")
+        except ImportError:  # pragma: no cover - tqdm is a dependency, but rendering must not need it
+            bar = None
+    n = 0
+    last = None
+    png_options = {k: v for k, v in options.items() if k not in ("crf", "preset", "check", "ffmpeg_log_level")}
+    try:
+        with VideoWriter(out_path, size=size, fps=fps, color=color, **options) as vw:
+            for fr in frames:
+                if color == "strain" and fr.segment_strain is None:
+                    raise ValueError(f"{gsd_path}: color='strain' but the trajectory has no strain energy logged "
+                                     f"(log/bonds/strain_energy_J); use color='speed' or rerun with strain output")
+                vw.append(fr)
+                last = fr
+                n += 1
+                if bar is not None:
+                    bar.update(1)
+    finally:
+        if bar is not None:
+            bar.close()
+        frames.close()
+    if png_path is not None and last is not None:
+        write_png(last, png_path, size=png_size, color=color, **png_options)
+    return n

@@ -1,0 +1,45 @@
+"""Taichi initialisation: one place that picks the arch and thread count, with a clear fallback message."""
+from __future__ import annotations
+
+import os
+import sys
+
+import taichi as ti
+
+_state = {"arch": None, "threads": None}
+
+
+class BackendError(RuntimeError):
+    pass
+
+
+def init(arch: str = "cpu", threads: int | None = None, fallback: bool = True, quiet: bool = True) -> str:
+    """Initialise Taichi once per (arch, threads). Returns the arch actually used.
+
+    An unavailable GPU arch falls back to CPU with one line on stderr (or raises BackendError if fallback=False)."""
+    threads = threads or int(os.environ.get("TAICHIMYXO_THREADS", "0")) or (os.cpu_count() or 1)
+    if _state["arch"] == arch and _state["threads"] == threads:
+        return arch
+    arches = {"cpu": ti.cpu, "cuda": ti.cuda, "vulkan": ti.vulkan, "metal": ti.metal, "gpu": ti.gpu}
+    if arch not in arches:
+        raise BackendError(f"--arch {arch!r}: allowed values are cpu, cuda, vulkan, metal, gpu")
+    kw = dict(cpu_max_num_threads=threads, offline_cache=True, log_level=ti.WARN if quiet else ti.INFO,
+              default_fp=ti.f32, random_seed=0)
+    used = arch
+    if arch != "cpu":
+        ti.init(arch=arches[arch], **kw)
+        if ti.lang.impl.current_cfg().arch == ti.cpu or ti.lang.impl.current_cfg().arch == ti.x64 or \
+                ti.lang.impl.current_cfg().arch == ti.arm64:
+            if not fallback:
+                raise BackendError(f"--arch {arch}: not available on this machine")
+            print(f"taichimyxo: arch {arch} is not available here; running on the CPU instead", file=sys.stderr)
+            used = "cpu"
+    else:
+        ti.init(arch=ti.cpu, **kw)
+    _state.update(arch=used if used == "cpu" else arch, threads=threads)
+    return used
+
+
+def reset() -> None:
+    ti.reset()
+    _state.update(arch=None, threads=None)

@@ -1,0 +1,410 @@
+"""Scenes: TOML files validated into a Scene, with units converted once, here.
+
+Convention: every key that carries a unit names it (`k_c_N_per_m`, `f_max_pN`, `dt_ms`). Values in scene files
+are in the paper's units (SI or the paper's µm/min, h, min); `Scene` exposes internal units (µm, s, pN).
+All defaults live in `SCHEMA` below and nowhere else; a scene file states only what its paper caption states.
+Unknown keys, wrong types and out-of-range values are refused with one line naming the key and what is allowed.
+"""
+from __future__ import annotations
+
+import copy
+import json
+import math
+import os
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+SCENES_DIR = Path(__file__).resolve().parent.parent / "scenes"
+
+
+class SceneError(ValueError):
+    """Bad scene input; the message is one line meant for the user."""
+
+
+# (section, key) -> (type, default, check, doc). check: "pos" (> 0), "nonneg" (>= 0), a tuple of allowed values,
+# a (lo, hi) range given as ("range", lo, hi), or None.
+_F, _I, _S, _B = float, int, str, bool
+SCHEMA: dict[str, dict[str, tuple]] = {
+    "scene": {
+        "name": (_S, "", None, "short name, e.g. S3"),
+        "title": (_S, "", None, "one line for `list`"),
+        "paper_figure": (_S, "", None, "figure or video of the paper this reproduces"),
+        "caption": (_S, "", None, "what the paper's caption says"),
+    },
+    "domain": {
+        "width_um": (_F, 200.0, "pos", "periodic box width, µm"),
+        "height_um": (_F, 200.0, "pos", "periodic box height, µm"),
+    },
+    "population": {
+        "start": (_S, "random", ("random", "aligned", "spiral"), "initial configuration"),
+        "density_cells_per_cm2": (_F, 5e6, "pos", "cell density (low 5e6, high 4e7)"),
+        "cells": (_I, 0, "nonneg", "number of cells; 0 = density x area"),
+        "polarity": (_S, "random", ("random", "same"), "engine directions at start"),
+    },
+    "cell": {
+        "length_um": (_F, 5.0, "pos", "outline length L including round caps, µm"),
+        "width_um": (_F, 0.5, "pos", "cell width W, µm"),
+        "particles": (_I, 8, ("range", 3, 64), "particles per cell N"),
+        "k_s_N_per_m": (_F, 0.01, "pos", "linear spring stiffness k_s, N/m"),
+        "k_a_N_m": (_F, 1e-17, "pos", "angular spring stiffness k_a, N·m (1e-18 very flexible, 1e-17 flexible, "
+                                      "1e-16 rigid, 1e-15 very rigid)"),
+        "engine_force_pN": (_F, 100.0, "pos", "engine force F_e per cell, pN"),
+        "speed_um_per_min": (_F, 4.0, "pos", "free-cell speed v_b, µm/min (sets the drag)"),
+        "drag_ratio_normal": (_F, 0.5, "pos", "zeta_n / zeta_t [decision, MODEL.md]"),
+    },
+    "collisions": {
+        "k_c_N_per_m": (_F, 0.01, "pos", "collision stiffness k_c, N/m (low density 0.01, high 0.002)"),
+    },
+    "guiding": {
+        "kind": (_S, "none", ("none", "passive", "active", "adhesion"), "short-range head-to-tail guiding"),
+        "f_max_pN": (_F, 200.0, "pos", "maximum guiding force F_max^g, pN"),
+        "range_um": (_F, 0.25, "pos", "guiding range d_g (gap beyond W), µm"),
+        "distance": (_S, "segments", ("segments", "particles"), "head-tail distance: between segments or particles"),
+        "self": (_B, True, None, "a cell may follow its own tail"),
+    },
+    "slime": {
+        "enabled": (_B, False, None, "long-range guiding by slime trails"),
+        "grid_um": (_F, 0.25, "pos", "slime grid element side, µm"),
+        "f_max_pN": (_F, 200.0, "pos", "slime guiding force F_max^s, pN"),
+    },
+    "reversals": {
+        "enabled": (_B, False, None, "cells reverse their engine direction periodically"),
+        "period_min": (_F, 10.0, "pos", "mean reversal period T_R, min"),
+        "period_sd_fraction": (_F, 0.24, "nonneg", "SD of the period as a fraction of T_R"),
+        "min_period_fraction": (_F, 0.1, "pos", "periods are truncated below this fraction of T_R"),
+        "suppression": (_B, False, None, "skip reversals during head-to-tail interactions"),
+    },
+    "run": {
+        "hours": (_F, 6.0, "pos", "simulated time, h"),
+        "dt_ms": (_F, 0.0, "nonneg", "time step, ms; 0 = the integrator's default from the accuracy study"),
+        "integrator": (_S, "explicit", ("explicit", "imex"), "explicit: the paper's overdamped Euler step; "
+                       "imex: cell springs implicit, contacts explicit"),
+        "precision": (_S, "mixed", ("f32", "f64", "mixed"), "f32, f64, or mixed (f64 positions, f32 forces)"),
+        "seed": (_I, 1, "nonneg", "random seed"),
+        "mass_pg": (_F, 0.0, "nonneg", "particle mass for the semi-implicit Euler step, pg; 0 = overdamped"),
+        "skin_um": (_F, 0.3, "pos", "neighbour-list skin, µm"),
+        "max_neighbours": (_I, 0, "nonneg", "neighbour-list capacity per segment; 0 = from density"),
+        "speed_window_s": (_F, 1.0, "pos", "window over which displayed speeds are averaged, s"),
+    },
+    "output": {
+        "frame_interval_min": (_F, 1.0, "pos", "simulated minutes between frames"),
+        "color": (_S, "speed", ("speed", "strain"), "what the movie colours segments by"),
+        "video_width": (_I, 1920, ("range", 64, 7680), "movie width, px"),
+        "video_height": (_I, 1080, ("range", 64, 4320), "movie height, px"),
+        "fps": (_F, 10.0, "pos", "movie frames per second"),
+        "strain": (_B, False, None, "log per-segment strain energy in the trajectory"),
+        "movie": (_B, True, None, "write an MP4"),
+    },
+    "preview": {
+        "scale": (_F, 0.25, ("range", 0.01, 1.0), "--preview: box side scaled by this (cells scale with area)"),
+        "hours": (_F, 0.1, "pos", "--preview: simulated time, h"),
+        "frame_interval_min": (_F, 0.25, "pos", "--preview: minutes between frames"),
+    },
+}
+
+# the stiffness names the paper uses
+STIFFNESS_NAMES = {1e-18: "very flexible", 1e-17: "flexible", 1e-16: "rigid", 1e-15: "very rigid"}
+
+
+def defaults() -> dict:
+    return {sec: {k: v[1] for k, v in keys.items()} for sec, keys in SCHEMA.items()}
+
+
+def _check_value(sec: str, key: str, val):
+    typ, _, check, _ = SCHEMA[sec][key]
+    name = f"{sec}.{key}"
+    if typ is _F:
+        if isinstance(val, bool) or not isinstance(val, (int, float)):
+            raise SceneError(f"{name} = {val!r}: expected a number")
+        val = float(val)
+        if not math.isfinite(val):
+            raise SceneError(f"{name} = {val!r}: expected a finite number")
+    elif typ is _I:
+        if isinstance(val, bool) or not (isinstance(val, int) or (isinstance(val, float) and val.is_integer())):
+            raise SceneError(f"{name} = {val!r}: expected an integer")
+        val = int(val)
+    elif typ is _B:
+        if not isinstance(val, bool):
+            raise SceneError(f"{name} = {val!r}: expected true or false")
+    elif typ is _S:
+        if not isinstance(val, str):
+            raise SceneError(f"{name} = {val!r}: expected a string")
+    if check == "pos" and not val > 0:
+        raise SceneError(f"{name} = {val!r}: must be positive")
+    if check == "nonneg" and not val >= 0:
+        raise SceneError(f"{name} = {val!r}: must be zero or positive")
+    if isinstance(check, tuple) and check and check[0] == "range":
+        if not (check[1] <= val <= check[2]):
+            raise SceneError(f"{name} = {val!r}: must be between {check[1]} and {check[2]}")
+    elif isinstance(check, tuple) and val not in check:
+        raise SceneError(f"{name} = {val!r}: allowed values are {', '.join(map(str, check))}")
+    return val
+
+
+def _merge(base: dict, over: dict, where: str) -> None:
+    for sec, body in over.items():
+        if sec not in SCHEMA:
+            raise SceneError(f"{where}: unknown section [{sec}]; allowed: {', '.join(SCHEMA)}")
+        if not isinstance(body, dict):
+            raise SceneError(f"{where}: [{sec}] must be a table")
+        for key, val in body.items():
+            if key not in SCHEMA[sec]:
+                raise SceneError(f"{where}: unknown key {sec}.{key}; allowed in [{sec}]: {', '.join(SCHEMA[sec])}")
+            base[sec][key] = _check_value(sec, key, val)
+
+
+def parse_set(items: list[str]) -> dict:
+    """--set KEY=VALUE (dotted key, TOML value; bare words are taken as strings) -> nested dict."""
+    out: dict = {}
+    for item in items or []:
+        if "=" not in item:
+            raise SceneError(f"--set {item!r}: expected KEY=VALUE, e.g. --set guiding.kind=active")
+        key, raw = item.split("=", 1)
+        key = key.strip()
+        if key.count(".") != 1:
+            raise SceneError(f"--set {key!r}: expected a dotted key SECTION.KEY, e.g. cell.k_a_N_m")
+        sec, k = key.split(".")
+        if sec not in SCHEMA or k not in SCHEMA[sec]:
+            raise SceneError(f"--set {key}: unknown key; see `python -m taichimyxo keys`")
+        try:
+            val = tomllib.loads(f"v = {raw.strip()}")["v"]
+        except tomllib.TOMLDecodeError:
+            val = raw.strip()
+        out.setdefault(sec, {})[k] = val
+    return out
+
+
+def available_scenes() -> list[str]:
+    if not SCENES_DIR.is_dir():
+        return []
+    return sorted((p.stem for p in SCENES_DIR.glob("*.toml")), key=_scene_sort_key)
+
+
+def _scene_sort_key(name: str):
+    import re
+    m = re.match(r"([A-Za-z]+)(\d+)(.*)", name)
+    return (m.group(1), int(m.group(2)), m.group(3)) if m else (name, 0, "")
+
+
+def resolve_path(name_or_path: str) -> Path:
+    p = Path(name_or_path)
+    if p.suffix == ".toml" or os.sep in name_or_path:
+        if not p.is_file():
+            raise SceneError(f"scene file {name_or_path} not found")
+        return p
+    cand = SCENES_DIR / f"{name_or_path}.toml"
+    if not cand.is_file():
+        raise SceneError(f"unknown scene {name_or_path!r}; available: {', '.join(available_scenes())}")
+    return cand
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A validated scene. `raw` holds the values in scene-file units; properties give internal units."""
+    raw: dict
+    source: str = ""
+
+    # ---- construction
+    @classmethod
+    def load(cls, name_or_path: str, overrides: dict | None = None, preview: bool = False) -> "Scene":
+        path = resolve_path(name_or_path)
+        try:
+            data = tomllib.loads(path.read_text())
+        except tomllib.TOMLDecodeError as e:
+            raise SceneError(f"{path}: malformed TOML: {e}") from None
+        return cls.from_dict(data, overrides, preview, where=str(path), default_name=path.stem)
+
+    @classmethod
+    def from_dict(cls, data: dict, overrides: dict | None = None, preview: bool = False, where: str = "scene",
+                  default_name: str = "") -> "Scene":
+        raw = defaults()
+        _merge(raw, data, where)
+        if overrides:
+            _merge(raw, overrides, "--set")
+        if not raw["scene"]["name"]:
+            raw["scene"]["name"] = default_name or "scene"
+        if preview:
+            s = raw["preview"]["scale"]
+            raw["domain"]["width_um"] *= s
+            raw["domain"]["height_um"] *= s
+            if raw["population"]["cells"]:
+                raw["population"]["cells"] = max(1, round(raw["population"]["cells"] * s * s))
+            raw["run"]["hours"] = min(raw["run"]["hours"], raw["preview"]["hours"])
+            raw["output"]["frame_interval_min"] = raw["preview"]["frame_interval_min"]
+            raw["output"]["video_width"] = min(raw["output"]["video_width"], 640)
+            raw["output"]["video_height"] = min(raw["output"]["video_height"], 480)
+            raw["scene"]["name"] += "-preview" if not raw["scene"]["name"].endswith("-preview") else ""
+        sc = cls(raw=raw, source=where)
+        sc.validate()
+        return sc
+
+    def with_overrides(self, overrides: dict) -> "Scene":
+        raw = copy.deepcopy(self.raw)
+        _merge(raw, overrides, "override")
+        sc = Scene(raw=raw, source=self.source)
+        sc.validate()
+        return sc
+
+    def validate(self) -> None:
+        """Cross-key checks (single keys were checked on merge)."""
+        Lx, Ly = self.box
+        if min(Lx, Ly) < 2 * self.length:
+            raise SceneError(f"domain {Lx:g} x {Ly:g} µm is smaller than two cell lengths ({2 * self.length:g} µm)")
+        if self.width >= self.length:
+            raise SceneError(f"cell.width_um = {self.width:g} must be smaller than cell.length_um = {self.length:g}")
+        if self.n_cells < 1:
+            raise SceneError(f"population gives {self.n_cells} cells in {Lx:g} x {Ly:g} µm; need at least 1")
+        af = self.n_cells * self.length * self.width / (Lx * Ly)
+        limit = {"random": 0.5, "aligned": 1.0 + 1e-9, "spiral": 0.9}[self.start]
+        if af > limit:
+            raise SceneError(f"population: {self.n_cells} cells cover {af:.2f} of the area; the {self.start!r} start "
+                             f"can place at most {limit:.2f}")
+        if self.start == "spiral":
+            from .init import spiral_capacity
+            cap = spiral_capacity(self)
+            if self.n_cells > cap:
+                raise SceneError(f"population: {self.n_cells} cells do not fit on a spiral in {Lx:g} x {Ly:g} µm "
+                                 f"(at most {cap})")
+        if self.dt <= 0:
+            raise SceneError("run.dt_ms resolved to zero")
+        if self.hours * 3600 < self.dt:
+            raise SceneError(f"run.hours = {self.hours:g} is shorter than one step")
+
+    # ---- names and bookkeeping
+    @property
+    def name(self) -> str:
+        return self.raw["scene"]["name"]
+
+    def to_dict(self) -> dict:
+        return copy.deepcopy(self.raw)
+
+    def fingerprint(self, exclude=("output", "scene", "preview")) -> str:
+        """Hash of everything that changes the simulated trajectory (not the output settings)."""
+        import hashlib
+        d = {k: v for k, v in self.raw.items() if k not in exclude}
+        d["run"] = {k: v for k, v in d["run"].items() if k != "hours"}
+        d["_dt"] = self.dt
+        return hashlib.sha1(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
+
+    # ---- internal units (µm, s, pN)
+    @property
+    def box(self) -> tuple[float, float]:
+        return (self.raw["domain"]["width_um"], self.raw["domain"]["height_um"])
+
+    @property
+    def start(self) -> str:
+        return self.raw["population"]["start"]
+
+    @property
+    def n_cells(self) -> int:
+        c = self.raw["population"]["cells"]
+        if c:
+            return int(c)
+        Lx, Ly = self.box
+        per_um2 = self.raw["population"]["density_cells_per_cm2"] * 1e-8
+        return int(round(per_um2 * Lx * Ly))
+
+    @property
+    def N(self) -> int:
+        return self.raw["cell"]["particles"]
+
+    @property
+    def length(self) -> float:
+        return self.raw["cell"]["length_um"]
+
+    @property
+    def width(self) -> float:
+        return self.raw["cell"]["width_um"]
+
+    @property
+    def rest_length(self) -> float:
+        """l0: the chain spans L - W [decision, MODEL.md]."""
+        return (self.length - self.width) / (self.N - 1)
+
+    @property
+    def k_s(self) -> float:      # N/m -> pN/µm: x 1e6
+        return self.raw["cell"]["k_s_N_per_m"] * 1e6
+
+    @property
+    def k_a(self) -> float:      # N·m -> pN·µm: x 1e18
+        return self.raw["cell"]["k_a_N_m"] * 1e18
+
+    @property
+    def k_c(self) -> float:
+        return self.raw["collisions"]["k_c_N_per_m"] * 1e6
+
+    @property
+    def engine_force(self) -> float:
+        return self.raw["cell"]["engine_force_pN"]
+
+    @property
+    def v_b(self) -> float:      # µm/min -> µm/s
+        return self.raw["cell"]["speed_um_per_min"] / 60.0
+
+    @property
+    def zeta_t(self) -> float:
+        """Tangential drag per particle, pN·s/µm: a free straight cell moves at v_b."""
+        return (self.engine_force / self.N) / self.v_b
+
+    @property
+    def zeta_n(self) -> float:
+        return self.zeta_t * self.raw["cell"]["drag_ratio_normal"]
+
+    @property
+    def guiding(self) -> str:
+        return self.raw["guiding"]["kind"]
+
+    @property
+    def k_g(self) -> float:
+        return self.raw["guiding"]["f_max_pN"] / self.raw["guiding"]["range_um"]
+
+    @property
+    def slime(self) -> bool:
+        return self.raw["slime"]["enabled"]
+
+    @property
+    def reversals(self) -> bool:
+        return self.raw["reversals"]["enabled"]
+
+    @property
+    def suppression(self) -> bool:
+        return self.reversals and self.raw["reversals"]["suppression"]
+
+    @property
+    def integrator(self) -> str:
+        return self.raw["run"]["integrator"]
+
+    @property
+    def precision(self) -> str:
+        return self.raw["run"]["precision"]
+
+    @property
+    def dt(self) -> float:
+        """Time step in s; 0 in the file means the integrator's default (see stability.py)."""
+        ms = self.raw["run"]["dt_ms"]
+        if ms > 0:
+            return ms * 1e-3
+        from .stability import default_dt_ms
+        return default_dt_ms(self) * 1e-3
+
+    @property
+    def hours(self) -> float:
+        return self.raw["run"]["hours"]
+
+    @property
+    def steps(self) -> int:
+        return int(round(self.hours * 3600.0 / self.dt))
+
+    @property
+    def seed(self) -> int:
+        return self.raw["run"]["seed"]
+
+    @property
+    def frame_every_steps(self) -> int:
+        return max(1, int(round(self.raw["output"]["frame_interval_min"] * 60.0 / self.dt)))
+
+    @property
+    def strain(self) -> bool:
+        """Strain energy is computed only when the movie or the trajectory asks for it."""
+        return self.raw["output"]["strain"] or self.raw["output"]["color"] == "strain"
