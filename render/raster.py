@@ -454,7 +454,7 @@ _CACHE: "OrderedDict[tuple, Renderer]" = OrderedDict()
 def get_renderer(box, size=(1920, 1080), color="speed", **options) -> Renderer:
     """A Renderer for these settings, reused from a small cache (decorations are built once)."""
     key = (tuple(float(v) for v in box), tuple(int(v) for v in size),
-           color if isinstance(color, str) else id(color), tuple(sorted(options.items())))
+           color if isinstance(color, str) else repr(color), tuple(sorted((k, repr(v)) for k, v in options.items())))
     r = _CACHE.get(key)
     if r is None:
         r = Renderer(size, color, box, **options)

@@ -183,8 +183,8 @@ def available_scenes() -> list[str]:
 
 def _scene_sort_key(name: str):
     import re
-    m = re.match(r"([A-Za-z]+)(\d+)(.*)", name)
-    return (m.group(1), int(m.group(2)), m.group(3)) if m else (name, 0, "")
+    m = re.match(r"S(\d+)(.*)", name)
+    return (0, int(m.group(1)), m.group(2)) if m else (1, 0, name)
 
 
 def resolve_path(name_or_path: str) -> Path:

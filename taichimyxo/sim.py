@@ -25,6 +25,9 @@ from .frame import Frame, unwrap_chains
 from .rng import STREAM_REVERSAL, uniform_ti
 
 
+SERIAL_BELOW_SEGMENTS = 3000
+
+
 class NeighbourOverflow(RuntimeError):
     pass
 
@@ -170,6 +173,9 @@ class Simulation:
         self.nby = max(1, int(self.cfg.Ly // r))
         self.step_count = 0
         self.rebuilds = 0
+        # Taichi's CPU backend spends ~75 µs launching a parallel loop; below a few thousand segments one thread
+        # running the loops serially is faster than two threads (measured: see benchmarks/throughput).
+        self.serial = self.n_s < SERIAL_BELOW_SEGMENTS
         self._fb = ti.FieldsBuilder()
         fb = self._fb
         P, S, C = self.n_p, self.n_s, self.cfg.n_cells
@@ -253,7 +259,7 @@ class Simulation:
 
     def get_checkpoint(self) -> dict:
         st = {"x": self.x.to_numpy(), "x_snap": self.x_snap.to_numpy(), "ke": self.ke.to_numpy(),
-              "step": np.array(self.step_count)}
+              "step": np.array(self.step_count), "snap_step": np.array(getattr(self, "_snap_step", 0))}
         for name in ("rev_clock", "rev_period", "rev_count", "slime", "v"):
             f = getattr(self, name)
             if f is not None:
@@ -269,6 +275,7 @@ class Simulation:
             if f is not None:
                 f.from_numpy(st[name])
         self.x_snap.from_numpy(st["x_snap"])
+        self._snap_step = int(st["snap_step"])
         self.rebuild_neighbours()
 
     # ------------------------------------------------------------------ reversals: MODEL.md term 7
@@ -283,6 +290,7 @@ class Simulation:
     @ti.kernel
     def _init_reversals(self):
         """Periods ~ Normal(T_R, sd) truncated below; initial phases uniform (MODEL.md term 7)."""
+        ti.loop_config(serialize=self.serial)
         for c in range(self.cfg.n_cells):
             p = self._draw_period(c, 0)
             u = uniform_ti(ti.u32(self.cfg.seed), ti.u32(STREAM_REVERSAL + 100), ti.u32(c), ti.u32(0))
@@ -308,8 +316,10 @@ class Simulation:
     def _build_neighbours(self):
         nbx, nby = ti.static(self.nbx, self.nby)
         r2 = ti.static(self.cfg.list_radius ** 2)
+        ti.loop_config(serialize=self.serial)
         for i in range(nbx * nby):
             self.bin_count[i] = 0
+        ti.loop_config(serialize=self.serial)
         for s in range(self.n_s):
             m = self._seg_mid(s)
             bx = ti.min(ti.cast(m[0] / self.cfg.Lx * nbx, ti.i32), nbx - 1)
@@ -323,11 +333,14 @@ class Simulation:
                 self.bin_start[0] = 0
             else:
                 self.bin_start[i] = self.bin_start[i - 1] + self.bin_count[i - 1]
+        ti.loop_config(serialize=self.serial)
         for i in range(nbx * nby):
             self.bin_cursor[i] = self.bin_start[i]
+        ti.loop_config(serialize=self.serial)
         for s in range(self.n_s):
             k = ti.atomic_add(self.bin_cursor[self.seg_bin[s]], 1)
             self.bin_items[k] = s
+        ti.loop_config(serialize=self.serial)
         for s in range(self.n_s):
             cs = s // (self.cfg.N - 1)
             ks = s % (self.cfg.N - 1)
@@ -367,6 +380,7 @@ class Simulation:
                     self.nbr[s, j + 1] = self.nbr[s, j]
                     j -= 1
                 self.nbr[s, j + 1] = v
+        ti.loop_config(serialize=self.serial)
         for p in range(self.n_p):
             self.x_ref[p] = self.x[p]
         self.flags[1] = 0
@@ -489,6 +503,7 @@ class Simulation:
     def _pair_forces(self):
         """Per segment: gather contact forces onto its two particles; the head segment gathers its cell's guiding
         pull, the tail segment the adhesion reaction and the interaction flag (for reversal suppression)."""
+        ti.loop_config(serialize=self.serial)
         for s in range(self.n_s):
             fa = ti.Vector([0.0, 0.0], dt=self.fdt)
             fb = ti.Vector([0.0, 0.0], dt=self.fdt)
@@ -633,10 +648,12 @@ class Simulation:
         x_n+1 = x_n + dt v_n+1. With m = 0 this is the overdamped step v = F_t / zeta_t + F_n / zeta_n."""
         N = ti.static(self.cfg.N)
         if ti.static(self.cfg.suppression):
+            ti.loop_config(serialize=self.serial)
             for c in range(self.cfg.n_cells):
                 self.interacting[c] = 0
         self._pair_forces()
         half_skin2 = ti.static((0.5 * self.cfg.skin) ** 2)
+        ti.loop_config(serialize=self.serial)
         for c in range(self.cfg.n_cells):
             x0, X, F, T, Fi = self._cell_forces(c)
             moved = 0
@@ -670,6 +687,7 @@ class Simulation:
                 if ti.static(self.cfg.reversals):
                     self._reversal_clock(c)
         if ti.static(self.cfg.slime):
+            ti.loop_config(serialize=self.serial)
             for c in range(self.cfg.n_cells):
                 self._slime_write(c)
                 if ti.static(self.cfg.reversals):
@@ -737,6 +755,7 @@ class Simulation:
     # ------------------------------------------------------------------ measurements
     @ti.kernel
     def _copy_snap(self):
+        ti.loop_config(serialize=self.serial)
         for p in range(self.n_p):
             self.x_snap[p] = self.x[p]
 
@@ -760,6 +779,7 @@ class Simulation:
     @ti.kernel
     def _strain_kernel(self):
         """Strain energy per segment: 1/2 k_c (d - W)^2 per overlapping pair, half to each segment (MODEL.md)."""
+        ti.loop_config(serialize=self.serial)
         for s in range(self.n_s):
             e = 0.0
             for q in range(self.nbr_n[s]):
@@ -798,9 +818,11 @@ class Simulation:
     @ti.kernel
     def _forces_kernel(self, f_int: ti.template(), f_tot: ti.template(), tan: ti.template()):
         if ti.static(self.cfg.suppression):
+            ti.loop_config(serialize=self.serial)
             for c in range(self.cfg.n_cells):
                 self.interacting[c] = 0
         self._pair_forces()
+        ti.loop_config(serialize=self.serial)
         for c in range(self.cfg.n_cells):
             x0, X, F, T, Fi = self._cell_forces(c)
             for k in ti.static(range(self.cfg.N)):
@@ -840,3 +862,11 @@ class Simulation:
         if self._tree is not None:
             self._tree.destroy()
             self._tree = None
+
+
+def make_simulation(scene, **kw) -> "Simulation":
+    """The Simulation class for the scene's integrator."""
+    if scene.integrator == "imex":
+        from .implicit import ImplicitSimulation
+        return ImplicitSimulation(scene, **kw)
+    return Simulation(scene, **kw)

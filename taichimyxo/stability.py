@@ -1,6 +1,56 @@
-"""Time-step defaults and stability limits per integrator (set from the accuracy-cost study, benchmarks/)."""
+"""Time-step defaults and stability limits per integrator.
+
+The limits in `MEASURED_LIMITS_MS` come from `python -m taichimyxo bench stability` (benchmarks/results/
+stability.csv): the largest step at which the hard test configurations stayed within the invariants. Where no
+measurement covers a scene's stiffnesses, a linear-stability estimate is used: explicit Euler on the overdamped
+system is stable for dt < 2 / lambda_max with lambda_max the stiffest rate among springs (4 k_s / zeta_t), bending
+(16 k_a / (l0^2 zeta_n)) and contacts (4 k_c / zeta_n, a particle touching up to ~4 segments)."""
 from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from .scene import SceneError
+
+_LIMITS_FILE = Path(__file__).with_name("stability_limits.json")
+
+
+def _measured() -> dict:
+    try:
+        return json.loads(_LIMITS_FILE.read_text())
+    except (OSError, ValueError):
+        return {}
+
+
+def estimate_explicit_limit_ms(scene) -> float:
+    l0 = scene.rest_length
+    lam = max(4 * scene.k_s / scene.zeta_t, 16 * scene.k_a / (l0 * l0 * scene.zeta_n), 4 * scene.k_c / scene.zeta_n)
+    return 2.0 / lam * 1e3
+
+
+def stable_limit_ms(scene) -> float:
+    """The largest stable step for the scene's integrator and stiffnesses, ms."""
+    table = _measured().get(scene.integrator, {})
+    key = f"{scene.raw['cell']['k_a_N_m']:g}/{scene.raw['collisions']['k_c_N_per_m']:g}"
+    if key in table:
+        return float(table[key])
+    est = estimate_explicit_limit_ms(scene)
+    return est if scene.integrator == "explicit" else 4 * est
 
 
 def default_dt_ms(scene) -> float:
-    return 1.0
+    d = _measured().get("defaults", {}).get(scene.integrator)
+    if d:
+        key = f"{scene.raw['cell']['k_a_N_m']:g}/{scene.raw['collisions']['k_c_N_per_m']:g}"
+        if key in d:
+            return float(d[key])
+    return 1.0 if scene.integrator == "explicit" else min(10.0, 0.5 * stable_limit_ms(scene))
+
+
+def check_step(scene, force: bool = False) -> None:
+    lim = stable_limit_ms(scene)
+    dt_ms = scene.dt * 1e3
+    if dt_ms > lim and not force:
+        raise SceneError(f"run.dt_ms = {dt_ms:g} exceeds the stability limit {lim:.3g} ms of the {scene.integrator} "
+                         f"integrator at k_a = {scene.raw['cell']['k_a_N_m']:g} N·m, k_c = "
+                         f"{scene.raw['collisions']['k_c_N_per_m']:g} N/m; use a smaller step or --force")

@@ -1,0 +1,253 @@
+"""Analysis (issue 6) on synthetic trajectories with known answers, written with TrajectoryWriter."""
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+
+import numpy as np
+import pytest
+
+from taichimyxo.analysis import (analyze, cell_clusters, connected_components, contact_pairs, find_aggregates,
+                                 format_summary, main_analyze, synthetic_frames, write_synthetic)
+from taichimyxo.frame import Frame
+
+V_B = 4.0
+
+
+def _run(tmp_path, name="t", frames=3, plots=False, **kw):
+    path = str(tmp_path / f"{name}.gsd")
+    kw.setdefault("box", (100.0, 100.0))
+    write_synthetic(path, v_b=V_B, n_frames=frames, **kw)
+    return analyze(path, plots=plots)
+
+
+def _n_disk_cells(**disk):
+    return next(synthetic_frames(box=(100.0, 100.0), disks=[disk])).n_cells
+
+
+def _pdist(a, b, L):
+    d = np.asarray(a, float) - np.asarray(b, float)
+    d -= np.asarray(L) * np.round(d / np.asarray(L))
+    return float(np.hypot(*d))
+
+
+# ------------------------------------------------------------------------------------------------ known answers
+def test_rotating_disk_recovered(tmp_path):
+    disk = dict(centre=(37.3, 61.8), radius=10.25, omega=0.6)
+    s = _run(tmp_path, disks=[disk], jitter_deg=5, speed_noise=0.05, seed=3)
+    assert s["timeseries"]["n_aggregates"] == [1, 1, 1]
+    (a,) = s["aggregates_final"]
+    # the disk turns by 0.6 rad/min x 2 min between frame 0 and the last frame: the centre stays put
+    assert _pdist(a["centre_um"], disk["centre"], (100, 100)) < 0.3
+    assert a["radius_um"] == pytest.approx(10.25, rel=0.03)
+    assert a["n_cells"] == _n_disk_cells(**disk)
+    assert a["omega_rad_per_min"] == pytest.approx(0.6, rel=0.03)           # > 0: counter-clockwise
+    assert a["omega_fit_rad_per_min"] == pytest.approx(0.6, rel=0.03)
+    assert a["sense"] == 1
+    assert a["rigid"] and a["r2_origin"] > 0.9 and a["linear_fit"]["slope"] > 0
+    assert abs(a["linear_fit"]["intercept_um_per_min"] if "intercept_um_per_min" in a["linear_fit"]
+               else a["linear_fit"]["intercept"]) < 0.3
+    # one track over the three frames
+    assert len(s["tracks"]) == 1 and s["tracks"][0]["n_frames"] == 3
+
+
+def test_exact_disk_numbers_and_clockwise():
+    disk = dict(centre=(50.0, 50.0), radius=8.25, omega=-0.9)
+    fr = next(synthetic_frames(box=(100.0, 100.0), disks=[disk]))
+    (a,) = find_aggregates(fr, v_b=V_B)
+    assert a["sense"] == -1
+    assert a["omega_rad_per_min"] == pytest.approx(-0.9, rel=1e-3)
+    assert a["omega_fit_rad_per_min"] == pytest.approx(0.9, rel=1e-9)      # particle speeds are exactly |ω| r
+    assert a["r2_origin"] == pytest.approx(1.0, abs=1e-9)
+    assert a["centre_um"] == pytest.approx([50.0, 50.0], abs=1e-6)
+    assert a["radius_um"] == pytest.approx(8.25, rel=0.02)
+
+
+def test_straight_stream_is_no_aggregate(tmp_path):
+    s = _run(tmp_path, streams=[dict(origin=(10.0, 20.0), angle=0.4, rows=10, per_row=14, speed=V_B)])
+    assert s["timeseries"]["n_aggregates"] == [0, 0, 0]
+    assert s["tracks"] == [] and s["aggregates_final"] == []
+    ts = s["timeseries"]
+    assert ts["polar_order"][-1] == pytest.approx(1.0, abs=1e-6)      # all parallel, same direction
+    assert ts["largest_cluster"][-1] == 140                            # one touching block
+    assert ts["mean_speed_um_per_min"][-1] == pytest.approx(V_B)
+
+
+def test_random_gas_is_no_aggregate(tmp_path):
+    # area fraction 0.125 (the paper's low density) and a denser one
+    s = _run(tmp_path, gas=500, seed=1)
+    assert s["timeseries"]["n_aggregates"] == [0, 0, 0]
+    s = _run(tmp_path, name="dense", gas=2000, seed=2)
+    assert s["timeseries"]["n_aggregates"] == [0, 0, 0]
+
+
+@pytest.mark.parametrize("centre", [(1.0, 50.0), (99.2, 0.7), (50.0, 98.5)])
+def test_aggregate_straddling_periodic_edge(tmp_path, centre):
+    disk = dict(centre=centre, radius=10.25, omega=0.6)
+    s = _run(tmp_path, disks=[disk], frames=2)
+    assert s["timeseries"]["n_aggregates"] == [1, 1]
+    (a,) = s["aggregates_final"]
+    assert 0 <= a["centre_um"][0] < 100 and 0 <= a["centre_um"][1] < 100
+    assert _pdist(a["centre_um"], centre, (100, 100)) < 0.05
+    ref = find_aggregates(next(synthetic_frames(box=(100.0, 100.0), disks=[dict(disk, centre=(50.0, 50.0))])))[0]
+    assert a["n_cells"] == ref["n_cells"]
+    assert a["radius_um"] == pytest.approx(ref["radius_um"], rel=1e-6)
+    assert a["omega_rad_per_min"] == pytest.approx(ref["omega_rad_per_min"], rel=1e-6)
+
+
+def test_edge_speed_two_vb(tmp_path):
+    # outermost ring at r = 10 µm moving at 2 v_b: omega = 2 v_b / 10
+    disk = dict(centre=(40.0, 60.0), radius=10.25, omega=2 * V_B / 10.0)
+    s = _run(tmp_path, disks=[disk], frames=2)
+    (a,) = s["aggregates_final"]
+    # definition: mean speed of the outer 20 % of member cells by distance; the cells sit on rings of radius r
+    fr = next(synthetic_frames(box=(100.0, 100.0), disks=[disk]))
+    r_cells = np.sort(np.asarray(fr.particle_speed, float).mean(1) / disk["omega"])
+    k = math.ceil(0.2 * len(r_cells))
+    expected = disk["omega"] * r_cells[-k:].mean() / V_B
+    assert a["edge_speed_vb"] == pytest.approx(expected, rel=1e-5)
+    assert 1.85 < a["edge_speed_vb"] <= 2.0
+    assert a["edge_speed_rigid_vb"] == pytest.approx(2.0, rel=0.03)     # ω R with R the disk's outer edge
+    assert s["predictions"]["edge_speed_vb_per_track"] == [pytest.approx(a["edge_speed_vb"])]
+
+
+def test_uniform_speed_aggregate_is_not_rigid():
+    # slime-trail-like: every cell at v_b whatever its radius
+    disk = dict(centre=(50.0, 50.0), radius=10.25, omega=1.0, speed=V_B)
+    fr = next(synthetic_frames(box=(100.0, 100.0), disks=[disk], speed_noise=0.05, seed=4))
+    (a,) = find_aggregates(fr, v_b=V_B)
+    assert a["edge_speed_vb"] == pytest.approx(1.0, abs=0.05)
+    assert not a["rigid"]
+    assert a["r2_origin"] < 0 and abs(a["linear_fit"]["slope"]) < 0.05
+
+
+def test_two_touching_aggregates_and_noise_with_gas():
+    disks = [dict(centre=(30.0, 50.0), radius=10.25, omega=0.5), dict(centre=(50.6, 50.0), radius=10.25, omega=-0.5)]
+    fr = next(synthetic_frames(box=(100.0, 100.0), disks=disks))
+    aggs = sorted(find_aggregates(fr, v_b=V_B), key=lambda a: a["centre_um"][0])
+    assert len(aggs) == 2
+    assert [a["sense"] for a in aggs] == [1, -1]
+    assert aggs[0]["centre_um"] == pytest.approx([30.0, 50.0], abs=0.05)
+    assert aggs[1]["centre_um"] == pytest.approx([50.6, 50.0], abs=0.05)
+    # a noisy disk in a gas: heading jitter 10°, speed noise 10 %
+    disk = dict(centre=(60.0, 40.0), radius=12.25, omega=0.5)
+    fr = next(synthetic_frames(box=(100.0, 100.0), disks=[disk], gas=300, gas_avoids_disks=True, jitter_deg=10,
+                               speed_noise=0.1, seed=5))
+    (a,) = find_aggregates(fr, v_b=V_B)
+    assert _pdist(a["centre_um"], disk["centre"], (100, 100)) < 0.5
+    assert a["radius_um"] == pytest.approx(12.25, rel=0.05)
+    assert a["omega_fit_rad_per_min"] == pytest.approx(0.5, rel=0.05)
+    assert a["omega_rad_per_min"] == pytest.approx(0.5 * math.exp(-np.deg2rad(10) ** 2 / 2), rel=0.05)
+
+
+def test_non_circulating_dense_blob_and_arc_are_rejected():
+    # a disk of cells with random orientations (jammed cluster)
+    fr = next(synthetic_frames(box=(100.0, 100.0), disks=[dict(centre=(50.0, 50.0), radius=10.25, omega=1.0)],
+                               jitter_deg=180, seed=6))
+    assert find_aggregates(fr) == []
+    # half a disk: a curved stream turning around a point, not an aggregate
+    fr = next(synthetic_frames(box=(100.0, 100.0), disks=[dict(centre=(50.0, 50.0), radius=10.25, omega=1.0)]))
+    keep = fr.positions.mean(1)[:, 1] > 50.0
+    half = Frame(time_s=0.0, step=0, box=fr.box, width_um=fr.width_um, positions=fr.positions[keep],
+                 engine_direction=fr.engine_direction[keep], particle_speed=fr.particle_speed[keep])
+    assert find_aggregates(half) == []
+
+
+def test_size_independence_regression(tmp_path):
+    # four aggregates with the same edge speed (2 v_b at the outer ring) -> slope consistent with 0, exponent ~0
+    cents = [(25.0, 25.0), (75.0, 25.0), (25.0, 75.0), (75.0, 75.0)]
+    radii = [5.25, 7.25, 9.25, 12.25]
+    same_edge = [dict(centre=c, radius=R, omega=(-1) ** i * 2 * V_B / (R - 0.25)) for i, (c, R) in
+                 enumerate(zip(cents, radii))]
+    s = _run(tmp_path, name="edge", disks=same_edge, frames=3)
+    reg = s["predictions"]["edge_speed_vs_radius_tracks"]
+    assert reg["n_aggregates"] == 4
+    assert abs(reg["loglog_exponent"]) < 0.1
+    assert abs(reg["slope_um_per_min_per_um"]) < 0.1
+    assert len(s["tracks"]) == 4 and all(t["n_frames"] == 3 for t in s["tracks"])
+    # the same angular speed for all -> edge speed grows with R: exponent ~1, not consistent with 0
+    same_omega = [dict(centre=c, radius=R, omega=0.6) for c, R in zip(cents, radii)]
+    s = _run(tmp_path, name="omega", disks=same_omega, frames=3)
+    reg = s["predictions"]["edge_speed_vs_radius_tracks"]
+    assert reg["loglog_exponent"] == pytest.approx(1.0, abs=0.15)
+    assert reg["consistent_with_zero"] is False
+
+
+def test_strain_profile_and_outputs(tmp_path):
+    disk = dict(centre=(50.0, 50.0), radius=10.25, omega=0.5)
+    s = _run(tmp_path, disks=[disk], gas=150, gas_avoids_disks=True, strain=True, frames=3, plots=True)
+    sp = s["strain_profile"]
+    assert sp is not None and sp["highest_toward_centre"] and sp["inner_over_outer"] > 1.5
+    assert len(s["plots"]) == 4 and all(os.path.getsize(p) > 1000 for p in s["plots"])
+    with open(s["json"]) as f:
+        j = json.load(f)
+    assert j["n_aggregates_final"] == 1
+    h = j["speed_histograms"]
+    assert sum(h["inside_aggregates"]) == 3 * _n_disk_cells(**disk)
+    assert sum(h["outside_aggregates"]) == 3 * 150
+    cd = np.array(j["cluster_size_distribution"]["fraction_of_cells"])
+    assert cd.shape[0] == 3 and np.allclose(cd.sum(1), 1.0)
+    txt = format_summary(s)
+    assert "1 rotating aggregate" in txt and "edge" in txt
+    # no strain logged -> no profile
+    s2 = _run(tmp_path, name="nostrain", disks=[disk], frames=1)
+    assert s2["strain_profile"] is None
+
+
+def test_cli_entry(tmp_path, capsys):
+    path = str(tmp_path / "cli.gsd")
+    write_synthetic(path, v_b=V_B, n_frames=4, box=(80.0, 80.0), disks=[dict(centre=(40.0, 40.0), radius=8.25,
+                                                                              omega=0.7)])
+    out = tmp_path / "out"
+    assert main_analyze([path, "--out", str(out), "--every", "2", "--no-plots"]) == 0
+    j = json.load(open(out / "cli.analysis.json"))
+    assert j["meta"]["n_frames_analyzed"] == 2 and j["meta"]["every"] == 2
+    assert "rotating aggregate" in capsys.readouterr().out
+
+
+# ------------------------------------------------------------------------------------------------ building blocks
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_contact_pairs_match_brute_force(seed):
+    rng = np.random.default_rng(seed)
+    L = np.array([13.0, 9.5])
+    p = rng.uniform(-5, 20, (400, 2))            # any image
+    rc = 0.8
+    i, j = contact_pairs(p, L, rc)
+    a, b = np.triu_indices(len(p), 1)
+    d = p[b] - p[a]
+    d -= L * np.round(d / L)
+    m = (d * d).sum(1) < rc * rc
+    assert set(zip(i.tolist(), j.tolist())) == set(zip(a[m].tolist(), b[m].tolist()))
+    assert len(i) == m.sum()                     # no duplicates
+
+
+def test_connected_components_and_periodic_clusters():
+    lab = connected_components(7, np.array([0, 1, 5, 3]), np.array([1, 2, 6, 2]))
+    assert lab[0] == lab[1] == lab[2] == lab[3] and lab[5] == lab[6] and len(set(lab.tolist())) == 3
+    # two cells touching across the x boundary, one far away
+    x = np.linspace(0, 4.5, 8)
+    c0 = np.stack([x + 0.2, np.full(8, 10.0)], 1)
+    c1 = np.stack([x + 30.0 - 4.5 - 0.2 - 0.55, np.full(8, 10.0)], 1)    # its last particle 0.55 µm before c0's first
+    c2 = np.stack([x + 10.0, np.full(8, 20.0)], 1)
+    lab, sizes, _, _ = cell_clusters(np.stack([c0, c1, c2]), (30.0, 30.0), 0.5)
+    assert lab[0] == lab[1] != lab[2] and sorted(sizes.tolist()) == [1, 2]
+
+
+def test_paper_scale_speed(tmp_path):
+    """2000 cells x 8 particles: per-frame cost. The full 360-frame measurement runs with TAICHIMYXO_BENCH=1."""
+    n_frames = 360 if os.environ.get("TAICHIMYXO_BENCH") else 8
+    cents = [(30, 30), (100, 30), (170, 30), (30, 100), (100, 100), (170, 100), (30, 170), (100, 170), (170, 170),
+             (199, 65)]
+    disks = [dict(centre=c, radius=6 + 0.8 * i, omega=(-1) ** i * 8.0 / (6 + 0.8 * i)) for i, c in enumerate(cents)]
+    nd = next(synthetic_frames(box=(200.0, 200.0), disks=disks)).n_cells
+    path = str(tmp_path / "paper.gsd")
+    write_synthetic(path, v_b=V_B, n_frames=n_frames, box=(200.0, 200.0), disks=disks, gas=2000 - nd,
+                    gas_avoids_disks=True, jitter_deg=10, speed_noise=0.1, strain=True)
+    t = time.perf_counter()
+    s = analyze(path, plots=bool(os.environ.get("TAICHIMYXO_BENCH")))
+    dt = time.perf_counter() - t
+    print(f"\nanalysis of {n_frames} frames x 2000 cells: {dt:.2f} s ({dt / n_frames * 1000:.0f} ms/frame)")
+    assert s["n_aggregates_final"] == 10
+    assert dt / n_frames < 0.5          # generous (measured ~35 ms/frame on 2 cores): catches O(n^2) regressions
