@@ -6,25 +6,30 @@ import sys
 
 import taichi as ti
 
-_state = {"arch": None, "threads": None}
+_state = {"arch": None, "threads": None, "fp": None}
 
 
 class BackendError(RuntimeError):
     pass
 
 
-def init(arch: str = "cpu", threads: int | None = None, fallback: bool = True, quiet: bool = True) -> str:
+def init(arch: str = "cpu", threads: int | None = None, fallback: bool = True, quiet: bool = True,
+         default_fp: str | None = None) -> str:
     """Initialise Taichi once per (arch, threads). Returns the arch actually used.
 
+    default_fp ("f32" or "f64") types the float literals and constants in kernels: an f64 scene wants "f64" so its
+    constants (rest length, stiffnesses) are not rounded to f32. None keeps the current setting (f32 at first init).
     An unavailable GPU arch falls back to CPU with one line on stderr (or raises BackendError if fallback=False)."""
     threads = threads or int(os.environ.get("TAICHIMYXO_THREADS", "0")) or (os.cpu_count() or 1)
-    if _state["arch"] == arch and _state["threads"] == threads:
-        return arch
+    fp = default_fp or _state["fp"] or "f32"
+    if _state["arch"] in (arch, "cpu" if arch != "cpu" and _state.get("fell_back") else None) \
+            and _state["threads"] == threads and _state["fp"] == fp:
+        return _state["arch"]
     arches = {"cpu": ti.cpu, "cuda": ti.cuda, "vulkan": ti.vulkan, "metal": ti.metal, "gpu": ti.gpu}
     if arch not in arches:
         raise BackendError(f"--arch {arch!r}: allowed values are cpu, cuda, vulkan, metal, gpu")
     kw = dict(cpu_max_num_threads=threads, offline_cache=True, log_level=ti.WARN if quiet else ti.INFO,
-              default_fp=ti.f32, random_seed=0)
+              default_fp=ti.f64 if fp == "f64" else ti.f32, random_seed=0)
     used = arch
     if arch != "cpu":
         ti.init(arch=arches[arch], **kw)
@@ -36,10 +41,10 @@ def init(arch: str = "cpu", threads: int | None = None, fallback: bool = True, q
             used = "cpu"
     else:
         ti.init(arch=ti.cpu, **kw)
-    _state.update(arch=used if used == "cpu" else arch, threads=threads)
+    _state.update(arch=used, threads=threads, fp=fp, fell_back=used != arch)
     return used
 
 
 def reset() -> None:
     ti.reset()
-    _state.update(arch=None, threads=None)
+    _state.update(arch=None, threads=None, fp=None)

@@ -102,8 +102,9 @@ def aligned_start(scene):
 
 def _spiral_params(scene):
     W, L = scene.width, scene.length
-    b = W / (2 * math.pi)                    # r = r0 + b theta: turns W apart
     r0 = 1.5 * L / math.pi                   # innermost turn: a cell spans at most ~1/3 of it
+    # turns W apart, plus the sagitta of the chords on both turns so the polyline cells do not overlap
+    b = (W + scene.rest_length ** 2 / (4 * r0)) / (2 * math.pi)
     return b, r0
 
 
@@ -123,7 +124,7 @@ def spiral_capacity(scene) -> int:
 
 
 def spiral_start(scene, gap_um: float = 0.05):
-    """Cells head to tail along an Archimedean spiral r = r0 + W theta / 2 pi (turns W apart), centred in the box,
+    """Cells head to tail along an Archimedean spiral r = r0 + b theta (turns W apart, see _spiral_params), centred,
     all moving outward along the spiral (the same way round), with `gap_um` between one cell's tail cap and the
     next cell's head cap (inside the guiding range)."""
     n, N, l0, W, L = scene.n_cells, scene.N, scene.rest_length, scene.width, scene.length

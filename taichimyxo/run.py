@@ -130,7 +130,7 @@ def run_scene(scene: Scene, out_dir: str = "videos", arch: str = "cpu", resume: 
             raise SceneError(f"--resume: {files['ckpt']} was written for different scene parameters")
 
     from . import backend
-    used_arch = backend.init(arch, threads)
+    used_arch = backend.init(arch, threads, default_fp="f64" if scene.precision == "f64" else None)
     from .sim import make_simulation
     from .trajectory import TrajectoryWriter
 

@@ -16,6 +16,7 @@ cell wins, a fixed rule), and flags.
 """
 
 import math
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -25,7 +26,7 @@ from .frame import Frame, unwrap_chains
 from .rng import STREAM_REVERSAL, uniform_ti
 
 
-SERIAL_BELOW_SEGMENTS = 3000
+SERIAL_BELOW_SEGMENTS = int(os.environ.get("TAICHIMYXO_SERIAL_BELOW", "3000"))
 
 
 class NeighbourOverflow(RuntimeError):
@@ -133,8 +134,8 @@ def closest_points(p1, q1, p2, q2):
     c = d1.dot(r)
     b = d1.dot(d2)
     eps = 1e-12
-    s = 0.0
-    t = 0.0
+    s = a * 0.0          # typed like the inputs (f32 or f64), not the default float
+    t = a * 0.0
     if a > eps and e > eps:
         denom = a * e - b * b
         if denom > 1e-9 * a * e:
@@ -500,6 +501,16 @@ class Simulation:
         return c * (self.cfg.N - 1) + (self.cfg.N - 2 if self.ke[c] > 0 else 0)
 
     @ti.func
+    def _contact_hook(self, s, i, t, P, dist, n):
+        """Called by _pair_forces for the i-th accepted contact of segment s (with segment t); the implicit
+        integrator (implicit.py) records contacts here for its Jacobian. Nothing in the explicit step."""
+        pass
+
+    @ti.func
+    def _contact_count_hook(self, s, n_contacts):
+        pass
+
+    @ti.func
     def _pair_forces(self):
         """Per segment: gather contact forces onto its two particles; the head segment gathers its cell's guiding
         pull, the tail segment the adhesion reaction and the interaction flag (for reversal suppression)."""
@@ -507,6 +518,7 @@ class Simulation:
         for s in range(self.n_s):
             fa = ti.Vector([0.0, 0.0], dt=self.fdt)
             fb = ti.Vector([0.0, 0.0], dt=self.fdt)
+            nc = 0
             for q in range(self.nbr_n[s]):
                 t = self.nbr[s, q]
                 ok, P, dist, n = self._contact(s, t)
@@ -514,6 +526,9 @@ class Simulation:
                     f = self.cfg.k_c * (self.cfg.W - dist) * n
                     fa += (1.0 - P) * f
                     fb += P * f
+                    self._contact_hook(s, nc, t, P, dist, n)
+                    nc += 1
+            self._contact_count_hook(s, nc)
             self.fa[s] = fa
             self.fb_[s] = fb
             if ti.static(self.cfg.head_tail):
@@ -781,7 +796,7 @@ class Simulation:
         """Strain energy per segment: 1/2 k_c (d - W)^2 per overlapping pair, half to each segment (MODEL.md)."""
         ti.loop_config(serialize=self.serial)
         for s in range(self.n_s):
-            e = 0.0
+            e = ti.cast(0.0, ti.f64)
             for q in range(self.nbr_n[s]):
                 t = self.nbr[s, q]
                 ok, P, dist, n = self._contact(s, t)

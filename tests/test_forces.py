@@ -1,0 +1,147 @@
+"""Each force term is minus the gradient of its energy; the S1 Text contact fixes; periodic contacts; free speed."""
+import math
+
+import numpy as np
+import pytest
+
+from simtools import (arc_cell, bend_energy, cell, contact_energy, contact_pairs, fd_gradient, sim_with,
+                      spring_energy)
+
+F64 = {"run": {"precision": "f64"}}
+L0 = 4.5 / 7
+W = 0.5
+
+
+def _wiggly(seed=1):
+    rng = np.random.default_rng(seed)
+    p = cell((10, 10), 20)
+    return p + rng.normal(0, 0.05, p.shape)
+
+
+def test_springs_and_bending_are_minus_energy_gradient():
+    pos = _wiggly()
+    sim = sim_with(pos, **F64)
+    k_s, k_a = sim.cfg.k_s, sim.cfg.k_a
+    f = sim.forces()["internal"][0]
+    g = fd_gradient(lambda p: spring_energy(p, k_s, L0) + bend_energy(p, k_a), pos, h=1e-7)
+    np.testing.assert_allclose(f, -g, rtol=1e-5, atol=1e-4 * np.abs(g).max())
+    sim.close()
+
+
+@pytest.mark.parametrize("k_a", [1e-18, 1e-15])
+def test_bending_alone_on_an_arc_with_rest_lengths(k_a):
+    pos = arc_cell((10, 10), 3.0, 0.0)          # chords exactly l0: springs at rest, only bending acts
+    sim = sim_with(pos, cell={"k_a_N_m": k_a}, **F64)
+    f = sim.forces()["internal"][0]
+    g = fd_gradient(lambda p: bend_energy(p, sim.cfg.k_a), pos, h=1e-7)
+    assert np.abs(g).max() > 0
+    np.testing.assert_allclose(f, -g, rtol=1e-5, atol=1e-6 * np.abs(g).max())
+    # bending forces are internal: no net force, no net torque
+    assert np.abs(f.sum(0)).max() < 1e-9 * np.abs(f).max()
+    torque = np.sum(pos[:, 0] * f[:, 1] - pos[:, 1] * f[:, 0])
+    assert abs(torque) < 1e-8 * np.abs(f).max() * 10
+    sim.close()
+
+
+def test_springs_alone_on_a_stretched_straight_chain():
+    pos = cell((10, 10), 0.0, l0=L0 * 1.05)       # straight: no bending
+    sim = sim_with(pos, **F64)
+    f = sim.forces()["internal"][0]
+    g = fd_gradient(lambda p: spring_energy(p, sim.cfg.k_s, L0), pos, h=1e-7)
+    np.testing.assert_allclose(f, -g, rtol=1e-6, atol=1e-6)
+    assert f[0, 0] > 0 and f[-1, 0] < 0            # a stretched chain contracts
+    sim.close()
+
+
+def _tip_on_cell(offset_along=0.3, depth=0.1, angle=90.0):
+    """Cell A horizontal; cell B's pole particle (particle 0) at `depth` inside A's outline."""
+    a = cell((10, 10), 0.0)
+    tip = np.array([a[3, 0] + offset_along, 10 + (W - depth)])
+    u = np.array([math.cos(math.radians(angle)), math.sin(math.radians(angle))])
+    b = tip[None, :] + np.arange(8)[:, None] * L0 * u[None, :]
+    return np.stack([a, b])
+
+
+@pytest.mark.parametrize("config", ["tip_interior", "tilted_crossing", "side_by_side_tilted"])
+def test_contact_forces_are_minus_energy_gradient(config):
+    if config == "tip_interior":
+        pos = _tip_on_cell(0.3, 0.1)
+    elif config == "tilted_crossing":
+        pos = _tip_on_cell(0.2, 0.15, angle=60.0)
+    else:
+        a = cell((10, 10), 0.0)
+        b = cell((10.4, 10.42), 3.0)
+        pos = np.stack([a, b])
+    sim = sim_with(pos, **F64)
+    fc = sim.forces()["contact"]
+    pairs = contact_pairs(pos, (20, 20), W)
+    assert pairs, "configuration must have contacts"
+    g = fd_gradient(lambda p: contact_energy(p, (20, 20), W, sim.cfg.k_c), pos, h=1e-7)
+    np.testing.assert_allclose(fc, -g, rtol=1e-5, atol=1e-5 * np.abs(g).max())
+    # Newton's third law: contacts exert no net force
+    assert np.abs(fc.sum((0, 1))).max() < 1e-9 * np.abs(fc).max()
+    sim.close()
+
+
+def test_contact_at_a_shared_node_is_counted_once():
+    """S1 Text defect (A): a pole pressing exactly on the node shared by two segments of another cell."""
+    depth = 0.1
+    pos = _tip_on_cell(offset_along=0.0, depth=depth)        # B's tip right above A's particle 3
+    sim = sim_with(pos, **F64)
+    fc = sim.forces()["contact"]
+    expected = sim.cfg.k_c * depth
+    assert fc[1, 0, 1] == pytest.approx(expected, rel=1e-9)        # not 2x
+    assert fc[0, :, 1].sum() == pytest.approx(-expected, rel=1e-9)
+    assert len(contact_pairs(pos, (20, 20), W)) == 1
+    sim.close()
+
+
+@pytest.mark.parametrize("shift", np.linspace(0.0, L0, 7))
+def test_sliding_along_a_straight_neighbour_feels_no_tangential_force(shift):
+    """S1 Text defect (B): a cell beside a straight cell, overlapping it, at any offset along it: the contact force
+    is normal (no washboard)."""
+    a = cell((10, 10), 0.0)
+    b = cell((10 + shift + 1.3, 10 + 0.42), 0.0)
+    sim = sim_with(np.stack([a, b]), **F64)
+    fc = sim.forces()["contact"]
+    fy = fc[1, :, 1].sum()
+    fx = fc[1, :, 0].sum()
+    assert fy > 0
+    assert abs(fx) < 1e-9 * fy
+    np.testing.assert_allclose(fc[:, :, 0], 0.0, atol=1e-9 * fy)
+    sim.close()
+
+
+@pytest.mark.parametrize("where", ["x_edge", "y_edge", "corner"])
+def test_contact_across_the_periodic_boundary_equals_inside(where):
+    pos = _tip_on_cell(0.25, 0.12, angle=70.0)
+    box = np.array([20.0, 20.0])
+    sim = sim_with(pos, **F64)
+    ref = sim.forces()["total"]
+    sim.close()
+    contact_point = pos[1, 0]
+    target = {"x_edge": np.array([0.0, 10.0]), "y_edge": np.array([10.0, 0.0]), "corner": np.array([0.0, 0.0])}[where]
+    moved = np.mod(pos - contact_point + target, box)
+    sim2 = sim_with(moved, **F64)
+    got = sim2.forces()["total"]
+    np.testing.assert_allclose(got, ref, rtol=1e-9, atol=1e-9 * np.abs(ref).max())
+    sim2.close()
+
+
+@pytest.mark.parametrize("ke", [1, -1])
+@pytest.mark.parametrize("precision", ["f64", "mixed"])
+def test_free_straight_cell_moves_at_v_b(ke, precision):
+    pos = cell((7.3, 11.1), 33.0)
+    sim = sim_with(pos, ke=[ke], run={"precision": precision, "dt_ms": 1.0})
+    sim.snapshot_speed()
+    x0 = sim.positions()[0].mean(0)
+    sim.run(3000)
+    x1 = sim.positions()[0].mean(0)
+    v = np.linalg.norm(x1 - x0) / sim.time * 60.0              # µm/min (no wrap: 0.2 µm travelled)
+    assert v == pytest.approx(4.0, rel=0.005)
+    heading = (x1 - x0) / np.linalg.norm(x1 - x0)
+    axis = pos[0] - pos[-1]
+    axis /= np.linalg.norm(axis)
+    assert np.dot(heading, axis) * ke > 0.9999              # k_e = +1 moves toward particle 0
+    np.testing.assert_allclose(sim.particle_speed(), 4.0, rtol=0.005)
+    sim.close()

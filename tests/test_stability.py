@@ -1,0 +1,291 @@
+"""Issue 5, parts 1-2: hard cases stay numerically stable at the scene's default step.
+
+Every case runs the explicit integrator at the default step (scene.dt) and asserts, through
+taichimyxo.invariants.check_invariants, after every window of 1 simulated second (the displayed-speed window):
+finite positions, segment lengths within +-20 % of l0, windowed particle speed <= 5 v_b, no two segments of
+different cells (nor non-adjacent segments of one cell) closer than 0.3 W (why 0.3 W: invariants.py; the contact
+force there is 7-35 cells' engine force), and spring and contact energy that do not keep growing.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from conftest import arc, build_small_scene, ring_radius_for_gap, straight
+from taichimyxo.invariants import Bounds, InvariantMonitor, check_invariants, measure
+
+STIFFNESS = {"very flexible": 1e-18, "flexible": 1e-17, "rigid": 1e-16, "very rigid": 1e-15}
+N = 8
+W = 0.5
+L0 = (5.0 - 0.5) / 7
+
+
+def _ke(*k):
+    return np.array(k, np.int8)
+
+
+# ------------------------------------------------------------------------------------------- the checker itself
+def test_measure_known_states():
+    box = (20.0, 20.0)
+    a = straight((10, 10), 0.0, N, L0)
+    b = straight((10, 10.2), 0.0, N, L0)                  # parallel, 0.2 µm = 0.4 W apart
+    m = measure(np.stack([a, b]), box, L0, W, 1e4, 10.0, 1e4)
+    assert m["finite"] and m["len_min"] == pytest.approx(1) and m["len_max"] == pytest.approx(1)
+    assert m["d_other_min"] == pytest.approx(0.4)
+    assert m["e_spring"] == pytest.approx(0, abs=1e-9) and m["e_bend"] == pytest.approx(0, abs=1e-9)
+    # overlap 0.3 µm on each of 7 segment pairs (plus the end-neighbour pairs at the same distance)
+    assert m["e_contact"] > 7 * 0.5 * 1e4 * 0.3 ** 2
+    # across the corner of the box: the same pair, shifted by the box
+    m2 = measure(np.stack([a - 10.0, b + 10.0]), box, L0, W, 1e4, 10.0, 1e4)
+    assert m2["d_other_min"] == pytest.approx(0.4)
+    c = a.copy()
+    c[3:] += [0.3 * L0, 0.0]                               # one segment stretched by 30 %
+    assert measure(c[None], box, L0, W, 1e4, 10.0, 1e4)["len_max"] == pytest.approx(1.3)
+    c[2, 0] = np.nan
+    assert not measure(c[None], box, L0, W, 1e4, 10.0, 1e4)["finite"]
+
+
+def test_checker_catches_an_unstable_step(small_scene, make_sim):
+    """The same overlapping pair at 20 ms (beyond the explicit limit, which --force would allow) violates the
+    invariants: the checker is not vacuous."""
+    sc = small_scene(2, run={"dt_ms": 20.0})
+    sim = make_sim(sc, np.stack([straight((10, 10), 0.0, N, L0), straight((10, 10.15), 0.1, N, L0)]), _ke(1, -1))
+    with pytest.raises(AssertionError, match="violation|non-finite"):
+        check_invariants(sim, 200, window_steps=50)
+
+
+# ------------------------------------------------------------------------------------------------- hard cases
+def test_very_rigid_cells_at_the_default_step(small_scene, make_sim):
+    """k_a = 1e-15 N·m (the stiffest bending mode): a strongly bent cell straightening, a head-on collision and a
+    crossing, at the scene's step."""
+    sc = small_scene(4, cell={"k_a_N_m": 1e-15})
+    cells = [arc((6, 6), 1.6, 0.0, N, L0),                                   # bent to 0.4 rad per joint
+             straight((13.0, 10.0), 0.0, N, L0), straight((13.0 + 4.5 + 0.4, 10.0), 0.0, N, L0),
+             straight((13.0, 14.0), 0.3, N, L0)]
+    sim = make_sim(sc, np.stack(cells), _ke(1, -1, 1, 1))
+    # The bent cell stores 490 pN·µm and unbends with ~600 pN at its joints: its ends legitimately move at ~15 v_b
+    # for a few ms (overdamped relaxation, rate 16 k_a / (l0^2 zeta_n) ~ 400/s). Check that relaxation every 10
+    # steps with the speed bound off, then everything.
+    relax = check_invariants(sim, 300, window_steps=10, bounds=Bounds(speed_factor=math.inf))
+    assert relax.records[-1]["e_bend"] < 0.1 * relax.records[0]["e_bend"]   # the bent cell straightened
+    mon = check_invariants(sim, 4000)
+    print(relax.summary())
+    print(mon.summary())
+
+
+@pytest.mark.parametrize("k_a,guiding", [(1e-17, "none"), (1e-15, "none"), (1e-17, "active"),
+                                         (1e-15, "active")], ids=["S11", "S12", "S13", "S14"])
+def test_high_density_aligned_soft_contacts(small_scene, make_sim, k_a, guiding):
+    """S11-S14 on a 15 x 15 µm box: aligned start at area fraction 1, k_c = 0.002 N/m."""
+    sc = small_scene(0, box=(15.0, 15.0), population={"start": "aligned", "density_cells_per_cm2": 4e7},
+                     cell={"k_a_N_m": k_a}, collisions={"k_c_N_per_m": 0.002}, guiding={"kind": guiding})
+    sim = make_sim(sc)
+    assert sc.n_cells == 90
+    print(check_invariants(sim, 4000).summary())
+
+
+@pytest.mark.parametrize("kind", ["active", "passive", "adhesion", "particles"])
+def test_guiding_at_gap_zero_and_at_the_cutoff(small_scene, make_sim, kind):
+    """A follower's head exactly at gap 0 and exactly at gap d_g (where the pull jumps from F_max to 0) from the
+    leader's tail, at 30 degrees so the pull has a normal part (passive steering acts)."""
+    guiding = {"kind": "active" if kind == "particles" else kind}
+    if kind == "particles":
+        guiding["distance"] = "particles"
+    sc = small_scene(2, guiding=guiding)
+    d_g = sc.raw["guiding"]["range_um"]
+    leader = straight((10.0, 10.0), 0.0, N, L0)              # k_e = +1: moves along -x, tail = particle N-1
+    sim = None
+    for gap in (0.0, d_g):
+        u = np.array([math.cos(math.radians(30)), math.sin(math.radians(30))])
+        head = leader[-1] + (W + gap) * u
+        follower = straight(head + 0.5 * (N - 1) * L0 * np.array([1.0, 0.0]), 0.0, N, L0)   # head = particle 0
+        pos = np.stack([leader, follower])
+        # the gap is as set (to rounding): segment distance between head and tail segments
+        from taichimyxo.geometry import closest_points
+        d = closest_points(follower[0], follower[1], leader[-2], leader[-1])[4]
+        assert d - W == pytest.approx(gap, abs=1e-12)
+        if sim is None:
+            sim = make_sim(sc, pos, _ke(1, 1))
+        else:
+            sim.set_state(pos, _ke(1, 1))
+        g = sim.forces()["total"]
+        print(f"gap {gap}: pull on the follower's head {g[1, 0]}")
+        print(check_invariants(sim, 3000).summary())
+
+
+@pytest.mark.parametrize("same_direction", [True, False], ids=["same-direction", "opposite"])
+@pytest.mark.parametrize("k_c", [0.01, 0.002])
+def test_two_cells_exactly_on_top_of_each_other(small_scene, make_sim, same_direction, k_c):
+    """Identical positions (segment distance 0 everywhere): the contact normal is undefined, so a fixed rule picks
+    one; the cells must separate to beyond 0.3 W within 0.3 s and then behave."""
+    sc = small_scene(2, collisions={"k_c_N_per_m": k_c})
+    a = straight((10.0, 10.0), 0.4, N, L0)
+    sim = make_sim(sc, np.stack([a, a.copy()]), _ke(1, 1 if same_direction else -1))
+    print(check_invariants(sim, 3000, settle_steps=300).summary())
+
+
+@pytest.mark.parametrize("layout", ["parallel-sliding", "parallel-same-way", "collinear-head-on",
+                                    "collinear-overlapping"])
+def test_parallel_and_collinear_segments_in_contact(small_scene, make_sim, layout):
+    """Degenerate closest-point geometry: exactly parallel segments side by side (the contact point is the middle
+    of the overlap), and exactly collinear segments end to end or lying along each other."""
+    sc = small_scene(2)
+    a = straight((10.0, 10.0), 0.0, N, L0)
+    settle = 0
+    if layout == "parallel-sliding":
+        pos, ke = np.stack([a, a + [1.0, 0.7 * W]]), _ke(1, -1)
+    elif layout == "parallel-same-way":
+        pos, ke = np.stack([a, a + [0.0, 0.8 * W]]), _ke(1, 1)
+    elif layout == "collinear-head-on":
+        # heads 0.8 W apart on one line, moving into each other
+        pos, ke = np.stack([a, a - [(N - 1) * L0 + 0.8 * W, 0.0]]), _ke(1, -1)
+    else:
+        # the second cell's half lies along the first's (segment distance 0), same line
+        pos, ke = np.stack([a, a + [0.5 * (N - 1) * L0, 0.0]]), _ke(1, 1)
+        settle = 300
+    sim = make_sim(sc, pos, ke)
+    print(check_invariants(sim, 3000, settle_steps=settle).summary())
+
+
+@pytest.mark.parametrize("stiffness", ["very flexible", "flexible", "very rigid"])
+def test_cell_bent_into_a_ring_following_its_own_tail(small_scene, make_sim, stiffness):
+    """One cell on a circle whose head is 0.1 µm (gap) behind its own tail, active following of itself."""
+    sc = small_scene(1, cell={"k_a_N_m": STIFFNESS[stiffness]}, guiding={"kind": "active", "self": True})
+    r = ring_radius_for_gap(N, L0, W + 0.1)
+    ring = arc((10.0, 10.0), r, 0.0, N, L0, sense=-1)      # particle 0 = head, moving counter-clockwise
+    sim = make_sim(sc, ring[None], _ke(1))
+    f = sim.forces()
+    print(f"ring radius {r:.3f} µm; head force {f['total'][0, 0]}")
+    print(check_invariants(sim, 4000).summary())
+
+
+@pytest.mark.parametrize("during", ["contact", "guiding"])
+def test_reversal_during_contact_and_during_guiding(small_scene, make_sim, during):
+    """Cells reverse (k_e flips, head and tail swap) while in a side contact, or while pulled head to tail."""
+    sc = small_scene(3, guiding={"kind": "active"},
+                     reversals={"enabled": True, "period_min": 0.02, "period_sd_fraction": 0.0})
+    a = straight((10.0, 10.0), 0.0, N, L0)
+    if during == "contact":
+        pos = np.stack([a, a + [1.0, 0.75 * W], a + [-1.0, -0.75 * W]])
+        ke = _ke(1, -1, -1)
+    else:
+        u = np.array([math.cos(0.4), math.sin(0.4)])
+        b = straight(a[-1] + (W + 0.1) * u + [0.5 * (N - 1) * L0, 0.0], 0.0, N, L0)
+        c = straight(b[-1] + (W + 0.2) * np.array([1.0, 0.0]) + [0.5 * (N - 1) * L0, 0.0], 0.0, N, L0)
+        pos = np.stack([a, b, c])
+        ke = _ke(1, 1, 1)
+    sim = make_sim(sc, pos, ke)
+    # every cell reverses 20 steps from now (mid-contact / mid-pull), then every 1.2 s
+    per = sim.rev_period.to_numpy()
+    sim.rev_clock.from_numpy((per - 20).astype(np.int32))
+    f0 = sim.forces()
+    if during == "contact":
+        assert np.abs(f0["contact"]).sum() > 0
+    else:
+        assert np.linalg.norm(f0["total"][1, 0]) > 0
+    ke0 = sim.engine_direction().copy()
+    mon = check_invariants(sim, 3000, window_steps=250)
+    assert int(sim.rev_count.to_numpy().min()) >= 2
+    assert mon.records[1]["step"] > 20
+    assert np.all(sim.engine_direction() == ke0 * (-1) ** sim.rev_count.to_numpy())
+    print(mon.summary())
+
+
+def test_cells_across_the_corner_of_the_box(small_scene, make_sim):
+    """Two crossing pairs of cells whose bodies straddle the corner (0, 0) of the periodic box, in contact through
+    the wrap in both x and y."""
+    sc = small_scene(3, box=(12.0, 12.0), guiding={"kind": "active"})
+    a = straight((0.0, 0.0), math.radians(45), N, L0)
+    b = straight((0.0, 0.0) + np.array([-0.35, 0.35]), math.radians(45), N, L0)      # 0.49 µm: touching
+    c = straight((12.0, 12.0), math.radians(-45), N, L0) + [0.0, 0.0]                  # crossing a and b
+    sim = make_sim(sc, np.stack([a, b, c]), _ke(1, -1, 1))
+    f = sim.forces()["contact"]
+    assert np.abs(f).sum() > 0
+    mon = check_invariants(sim, 3000, settle_steps=300)
+    print(mon.summary())
+
+
+@pytest.mark.parametrize("box", [10.0, 10.1], ids=["whole-elements", "partial-element"])
+def test_slime_element_at_the_wrap(small_scene, make_sim, box):
+    """Slime trails across the periodic boundary: a cell whose rear particle sits exactly on x = 0 = L, depositing
+    into the last/first column, and a follower crossing the wrap along that trail (10.1 µm: the grid does not divide
+    the box, the wrapping column is narrower)."""
+    sc = small_scene(2, box=(box, box), slime={"enabled": True})
+    lead = straight((0.0, 5.0), 0.0, N, L0)
+    lead -= [lead[0, 0], 0.0]                                   # particle 0 (the rear, k_e = -1) exactly at x = 0
+    follow = straight((box - 0.5 * (N - 1) * L0 - 0.6, 5.05), 0.1, N, L0)
+    sim = make_sim(sc, np.stack([lead, follow]), _ke(-1, -1))   # both move along +x
+    sim.run(1)
+    s = sim.slime.to_numpy()
+    assert np.abs(s[0]).sum() > 0                              # deposited into the first column
+    mon = check_invariants(sim, 4000)
+    s = sim.slime.to_numpy()
+    assert np.all(np.isfinite(s))
+    n = np.linalg.norm(s, axis=-1)
+    assert np.all((n == 0) | (np.abs(n - 1) < 1e-5))           # unit vectors or empty
+    print(mon.summary())
+
+
+@pytest.mark.parametrize("what", ["random-guided", "aligned-full"])
+def test_smallest_allowed_domain(small_scene, make_sim, what):
+    """A box of two cell lengths: a cell's periodic image is one cell length behind it."""
+    if what == "random-guided":
+        sc = small_scene(4, box=(10.0, 10.0), guiding={"kind": "active"})
+    else:
+        sc = small_scene(0, box=(10.0, 10.0), population={"start": "aligned", "density_cells_per_cm2": 4e7},
+                         collisions={"k_c_N_per_m": 0.002})
+        assert sc.n_cells == 40
+    sim = make_sim(sc)
+    print(check_invariants(sim, 3000).summary())
+
+
+def test_single_cell(small_scene, make_sim):
+    """A single free cell moves straight at v_b (self-following on: its own tail is far away)."""
+    sc = small_scene(1, guiding={"kind": "active"})
+    sim = make_sim(sc, straight((10.0, 10.0), 0.7, N, L0)[None], _ke(1))
+    mon = check_invariants(sim, 2000)
+    assert mon.records[-1]["speed_max_vb"] == pytest.approx(1.0, rel=1e-3)
+
+
+# ------------------------------------------------------------------------------------------- property tests
+_SIMS: dict = {}
+
+
+@pytest.fixture(scope="module")
+def sim_cache():
+    from taichimyxo import backend
+    backend.init("cpu", 2)
+    yield _SIMS
+    for sim in _SIMS.values():
+        sim.close()
+    _SIMS.clear()
+
+
+# derandomize: the same 12 examples each run, so their kernels come from Taichi's offline cache (~1 s instead of
+# ~3 s per new compile-time configuration) and a failure reproduces exactly.
+@settings(max_examples=12, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(n=st.integers(2, 6), stiffness=st.sampled_from(sorted(STIFFNESS)), k_c=st.sampled_from([0.01, 0.002]),
+       guiding=st.sampled_from(["none", "passive", "active", "adhesion"]), seed=st.integers(0, 2 ** 16),
+       crowd=st.booleans())
+def test_random_small_configurations_stay_bounded(sim_cache, n, stiffness, k_c, guiding, seed, crowd):
+    """2-6 cells placed at random without overlap on a 10 x 10 µm box (crowd) or 12 x 12 µm, any paper stiffness,
+    either k_c and any guiding kind: 1000 steps at the default step keep every invariant. One Simulation per
+    compile-time configuration; new positions are loaded with set_state."""
+    from taichimyxo.init import random_start
+    from taichimyxo.sim import Simulation
+    box = 10.0 if crowd else 12.0
+    sc = build_small_scene(n, box=(box, box), cell={"k_a_N_m": STIFFNESS[stiffness]},
+                           collisions={"k_c_N_per_m": k_c}, guiding={"kind": guiding}, run={"seed": seed})
+    pos, ke = random_start(sc)
+    key = (n, box, stiffness, k_c, guiding)
+    sim = sim_cache.get(key)
+    if sim is None:
+        sim = sim_cache[key] = Simulation(sc, pos, ke)
+    else:
+        sim.set_state(pos, ke)
+    check_invariants(sim, 1000, window_steps=250)
