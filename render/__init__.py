@@ -1,7 +1,7 @@
 """taichimyxo.render: off-screen movies and figure panels from Frames (no display, no GPU, no Taichi).
 
 - :func:`render_frame` — one Frame → RGB image (H, W, 3) uint8: cells as capsules, each segment coloured by its speed
-  (linear 0–16 µm/min) or strain energy (log10, 1e-20–1e-16 J), colormap ``turbo`` (a perceptual ``jet``), white
+  (linear 0–16 µm/min) or strain energy (log10, 1e-21–1e-17 J), colormap ``turbo`` (a perceptual ``jet``), white
   background, colour bar with units, time (h:mm) and scale bar at the bottom.
 - :class:`VideoWriter` — Frames → MP4 (H.264, yuv420p), checked after close.
 - :func:`write_png` — one Frame → PNG figure panel.
@@ -26,7 +26,8 @@ def render_trajectory(gsd_path, out_path, color="speed", size=(1920, 1080), fps=
     """Render the GSD trajectory ``gsd_path`` to the MP4 ``out_path`` (no simulation). Returns the frame count.
 
     every: use every n-th stored frame. png_path: also write the last rendered frame as a PNG figure panel of
-    ``png_size`` (same colours). options: VideoWriter / Renderer options (crf, preset, background, vmax, strain_range, …).
+    ``png_size`` (same colours). options: VideoWriter / Renderer options (crf, preset, background, vmax,
+    strain_range, title, …).
     Raises ValueError if ``color="strain"`` and the trajectory has no strain energy logged."""
     from taichimyxo.trajectory import count_frames, read_frames
 

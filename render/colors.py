@@ -4,14 +4,17 @@ Two quantities can colour the cells, segment by segment (MODEL.md, "What is meas
 
 - ``speed``: segment speed in µm/min, **linear** scale from 0 to 16 µm/min (4 v_b, the predicted maximum edge
   speed of an actively guided aggregate). Values outside are clipped to the end colours.
-- ``strain``: segment strain energy in J, **logarithmic** scale, log10(E) from 1e-20 J to 1e-16 J by default
-  (one contact of a cell pushed by its own engine, F_e/k_c = 0.01 µm overlap, stores about 5e-19 J, the middle of
-  the bar; overlaps of 0.05 µm in aggregate cores store about 1e-17 J). Segments with zero strain (no overlap), or
-  strain below the lower end, are shown in the bottom colour; above the upper end, in the top colour.
+- ``strain``: segment strain energy in J, **logarithmic** scale, log10(E) from 1e-21 J to 1e-17 J by default.
+  A contact of a cell pushed by its own engine (overlap F_e/k_c = 0.01 µm at k_c = 0.01 N/m) stores
+  ½ k_c δ² = 5e-19 J, half on each of the two segments: 2.5e-19 J, in the upper half of the bar (a 0.1 h S3 preview
+  gave a median of 1e-21 J over overlapping segments and a maximum of 3e-19 J). Yellow to red are left for the
+  many-cell pushing of aggregate cores (overlaps 0.03–0.06 µm: 2e-18–1e-17 J per segment). Segments with zero
+  strain (no overlap), or strain below the lower end, are shown in the bottom colour; above the upper end, in the
+  top colour.
 
-The colormap is matplotlib's ``turbo`` (Google's perceptually smoothed replacement of MATLAB's ``jet``, which the
-paper's figures use: dark blue → cyan → green → yellow → red). It is sampled as a 256-entry uint8 lookup table,
-indexed exactly as matplotlib indexes a float in [0, 1] (``floor(x * 256)``, 1.0 → 255), so
+The colormap is matplotlib's ``turbo`` (Google's perceptually smoothed replacement of MATLAB's ``jet``, the kind
+of rainbow scale of the paper's figures: dark blue → cyan → green → yellow → red). It is sampled as a 256-entry
+uint8 lookup table, indexed exactly as matplotlib indexes a float in [0, 1] (``floor(x * 256)``, 1.0 → 255), so
 ``ColorScale.rgb(v)`` equals ``matplotlib.colormaps["turbo"](x, bytes=True)[:3]`` with ``x`` the normalised value.
 """
 from __future__ import annotations
@@ -23,7 +26,7 @@ import numpy as np
 N_COLORS = 256
 DEFAULT_COLORMAP = "turbo"
 SPEED_MAX_UM_PER_MIN = 16.0            # 4 v_b
-STRAIN_RANGE_J = (1e-20, 1e-16)         # log10 scale ends
+STRAIN_RANGE_J = (1e-21, 1e-17)         # log10 scale ends
 
 
 def colormap_lut(name: str = DEFAULT_COLORMAP) -> np.ndarray:
@@ -109,7 +112,7 @@ def speed_scale(vmax: float = SPEED_MAX_UM_PER_MIN, colormap: str = DEFAULT_COLO
 
 
 def strain_scale(range_J: tuple[float, float] = STRAIN_RANGE_J, colormap: str = DEFAULT_COLORMAP) -> ColorScale:
-    """Logarithmic range_J[0]..range_J[1] J (default 1e-20..1e-16), a tick at each power of ten."""
+    """Logarithmic range_J[0]..range_J[1] J (default 1e-21..1e-17), a tick at each power of ten."""
     lo, hi = (float(range_J[0]), float(range_J[1]))
     if not (0 < lo < hi):
         raise ValueError(f"strain colour scale: range_J={range_J!r} must satisfy 0 < low < high (J)")

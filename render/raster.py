@@ -3,7 +3,7 @@
 Picture (as the paper's Fig 2–4 and supplementary videos): the periodic box, fitted into the image keeping its
 aspect ratio, on a white background (``background="black"`` for a dark one); every cell a capsule of diameter
 ``frame.width_um`` drawn along its particle chain, each SEGMENT in the colour of its own speed (linear 0–16 µm/min)
-or strain energy (log10 1e-20–1e-16 J), see :mod:`taichimyxo.render.colors` for the scales (colormap ``turbo``,
+or strain energy (log10 1e-21–1e-17 J), see :mod:`taichimyxo.render.colors` for the scales (colormap ``turbo``,
 a perceptually smoothed ``jet``). Below the box: the colour bar with ticks and a label with units, the simulated
 time as ``t = h:mm h``, and a scale bar of a round length of about a quarter of the box width.
 
@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .colors import ColorScale, make_scale
+from .colors import make_scale
 
 BACKGROUNDS = {
     "white": ((255, 255, 255), (0, 0, 0), (170, 170, 170)),   # background, text, box outline
@@ -95,6 +95,7 @@ class Layout:
     scalebar: tuple[int, int, int, int] | None  # the bar itself
     scalebar_um: float
     time_center: tuple[int, int] | None         # (row, col) of the centre of the time text
+    title_center: tuple[int, int] | None        # (row, col) of the centre of the title (scene name), under the time
     font_px: float                              # tick label size, px
 
 
@@ -120,7 +121,7 @@ def compute_layout(size: tuple[int, int], box: tuple[float, float], decorations:
         raise ValueError(f"box={box!r}: both sides must be > 0 µm")
     u = min(W, H) / 1080.0
     margin = max(2, round(16 * u))
-    strip = round(118 * u) if decorations else 0
+    strip = round(104 * u) if decorations else 0
     avail_w, avail_h = W - 2 * margin, H - 2 * margin - strip
     s = min(avail_w / Lx, avail_h / Ly)
     bw, bh = max(1, int(math.floor(Lx * s + 1e-6))), max(1, int(math.floor(Ly * s + 1e-6)))
@@ -128,20 +129,22 @@ def compute_layout(size: tuple[int, int], box: tuple[float, float], decorations:
     row0 = margin + (avail_h - bh) // 2
     vp = Viewport((Lx, Ly), s, col0, row0, bw, bh)
     if not decorations:
-        return Layout((W, H), vp, u, None, None, 0.0, None, 18 * u)
+        return Layout((W, H), vp, u, None, None, 0.0, None, None, 18 * u)
     # the bottom strip spans at least the box, at least ~900 px (if the image is that wide), centred on the box
     sw = min(W - 2 * margin, max(bw, round(900 * u)))
     sx0 = max(margin, min(W - margin - sw, col0 + bw // 2 - sw // 2))
     top = row0 + bh + round(14 * u)
-    cb_w, cb_h = round(0.40 * sw), max(4, round(22 * u))
-    colorbar = (top, top + cb_h, sx0, sx0 + cb_w)
+    cb_x0 = max(sx0, margin + round(36 * u))        # room for the first tick label (e.g. 10^-20) left of the bar
+    cb_w, cb_h = round(0.40 * sw) - (cb_x0 - sx0), max(4, round(22 * u))
+    colorbar = (top, top + cb_h, cb_x0, cb_x0 + cb_w)
     sb_um = nice_scalebar_length(Lx)
     sb_len = max(1, round(sb_um * s))
     sb_h = max(2, round(6 * u))
     sb_row = top + round(34 * u)
     scalebar = (sb_row, sb_row + sb_h, sx0 + sw - sb_len, sx0 + sw)
     time_center = (top + round(30 * u), sx0 + round(0.40 * sw) + (sw - round(0.40 * sw) - sb_len) // 2)
-    return Layout((W, H), vp, u, colorbar, scalebar, sb_um, time_center, 18 * u)
+    title_center = (top + round(66 * u), time_center[1])
+    return Layout((W, H), vp, u, colorbar, scalebar, sb_um, time_center, title_center, 18 * u)
 
 
 # --------------------------------------------------------------------------------------------------- capsules
@@ -327,15 +330,17 @@ class Renderer:
     ----------
     size: (width, height) px.
     color: ``"speed"`` (linear 0–``vmax`` µm/min, default 16) or ``"strain"`` (log10, ``strain_range`` J,
-        default (1e-20, 1e-16)), or a :class:`ColorScale`.
+        default (1e-21, 1e-17)), or a :class:`ColorScale`.
     box: (Lx, Ly) µm of the periodic domain.
     background: ``"white"`` (the paper's look) or ``"black"``.
     decorations: draw colour bar, time and scale bar (False: the box only, fitted into the whole image).
     min_radius_px: capsules are never drawn thinner than this radius, so cells stay visible when zoomed out.
+    title: optional short text (e.g. the scene name) shown under the time.
     """
 
     def __init__(self, size=(1920, 1080), color="speed", box=(200.0, 200.0), *, background="white",
-                 decorations=True, colormap=None, vmax=None, strain_range=None, min_radius_px=0.6):
+                 decorations=True, colormap=None, vmax=None, strain_range=None, min_radius_px=0.6,
+                 title: str | None = None):
         if background not in BACKGROUNDS:
             raise ValueError(f"background={background!r}: allowed are {sorted(BACKGROUNDS)}")
         self.size = (int(size[0]), int(size[1]))
@@ -344,6 +349,7 @@ class Renderer:
         self.bg, self.fg, self.outline = (np.array(c, np.uint8) for c in BACKGROUNDS[background])
         self.decorations = decorations
         self.min_radius_px = float(min_radius_px)
+        self.title = None if title is None else str(title)
         self.layout = compute_layout(self.size, self.box, decorations)
         self.viewport = self.layout.viewport
         self.lut = self.scale.lut
@@ -385,6 +391,9 @@ class Renderer:
         s0, s1, q0, q1 = lay.scalebar
         fig.text((q0 + q1) / 2 / W, 1 - (s0 - 5 * u) / H, f"{lay.scalebar_um:g} µm", ha="center", va="bottom",
                  fontsize=20 * u * pt, color=fg)
+        if self.title:
+            tr, tc = lay.title_center
+            fig.text(tc / W, 1 - tr / H, self.title, ha="center", va="center", fontsize=18 * u * pt, color=fg)
         canvas.draw()
         img = np.ascontiguousarray(np.asarray(canvas.buffer_rgba())[:, :, :3])
         # exact colours painted over: gradient (column j ↔ value at its centre), its frame, the scale bar, the box
@@ -470,6 +479,6 @@ def render_frame(frame, size=(1920, 1080), color="speed", **options) -> np.ndarr
     """Render one Frame to an RGB image, shape (size[1], size[0], 3), uint8.
 
     color="speed": each segment in the colour of its speed, linear 0–16 µm/min (turbo colormap);
-    color="strain": each segment in the colour of log10 of its strain energy, 1e-20–1e-16 J (zero: bottom colour).
-    options: see :class:`Renderer` (background, decorations, colormap, vmax, strain_range, min_radius_px)."""
+    color="strain": each segment in the colour of log10 of its strain energy, 1e-21–1e-17 J (zero: bottom colour).
+    options: see :class:`Renderer` (background, decorations, colormap, vmax, strain_range, min_radius_px, title)."""
     return get_renderer(frame.box, size, color, **options).render(frame)

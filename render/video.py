@@ -6,8 +6,9 @@
     write_png(last_frame, "videos/S3_final.png")
 
 The video is encoded by the ffmpeg binary shipped with imageio-ffmpeg (libx264, ``-crf 18 -preset veryfast``,
-``yuv420p`` so every player can show it, ``+faststart``), fed from a background thread. Width and height must be even for yuv420p: an odd size is rounded UP to the next
-even number (the frame is rendered at that size, never rescaled). After ``close()`` the file is checked: it must
+``yuv420p`` so every player can show it, ``+faststart``), fed from a background thread. Width and height must be
+even for yuv420p: an odd size is rounded UP to the next even number (the frame is rendered at that size, never
+rescaled). After ``close()`` the file is checked: it must
 exist, be non-empty, and ffmpeg must count exactly the frames that were appended; otherwise ``VideoWriteError``.
 """
 from __future__ import annotations
@@ -126,7 +127,8 @@ class VideoWriter:
         default: at 1080p about 3x cheaper than "medium" for the same size on our frames, leaving the CPU to the
         simulation).
     check: after closing, verify the file (exists, non-empty, frame count) and raise ``VideoWriteError`` if not.
-    render_options: passed to :class:`taichimyxo.render.raster.Renderer` (background, decorations, vmax, …).
+    render_options: passed to :class:`taichimyxo.render.raster.Renderer` (background, decorations, vmax,
+        strain_range, title, …).
 
     ffmpeg starts lazily at the first ``append`` (the box is taken from the first frame) and is fed from a
     background thread. ``close()`` is idempotent and safe on an interrupt path (``except KeyboardInterrupt:

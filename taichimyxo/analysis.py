@@ -81,6 +81,9 @@ speed) and the same regression on the aggregates of the last frame with aggregat
 ``predictions.verdict`` condenses this: rigid rotation (>= 50 % of aggregate-frames rigid), edge faster than v_b (mean
 edge speed / v_b over tracks > 1.15), size-independent edge speed (|t| < 2 with >= 3 tracks).
 
+Frames whose particle speeds are all zero (the first frame of a run, before the speed window has elapsed) count for
+the cluster, order and aggregate-number time series but not for speeds, tracks or profiles (meta lists their times).
+
 Also reported: cluster statistics and size distribution over time; mean speed; polar and nematic order (global, and
 local = mean over touching pairs); speed histograms of cells inside and outside aggregates; speed and strain energy
 profiles against r / R pooled over aggregates and frames (strain only when logged; strain inner (r < R/2) over outer).
@@ -613,6 +616,7 @@ def analyze_frames(frames: Iterable[Frame], v_b: float = 4.0, **params) -> dict:
     h_in = np.zeros(len(hist_edges) - 1)
     h_out = np.zeros(len(hist_edges) - 1)
     s_io = np.zeros(2)          # exact speed sums inside / outside
+    no_speed: list[float] = []  # times of frames without logged speeds
     sprof = [np.zeros(len(_RBINS) - 1), np.zeros(len(_RBINS) - 1)]
     eprof = [np.zeros(len(_RBINS) - 1), np.zeros(len(_RBINS) - 1)]
     have_strain = False
@@ -654,14 +658,21 @@ def analyze_frames(frames: Iterable[Frame], v_b: float = 4.0, **params) -> dict:
         inside = np.zeros(geo.n, bool)
         for a in aggs:
             inside[a["_members"]] = True
+        ts["n_aggregates"].append(len(aggs))
+        ts["fraction_in_aggregates"].append(float(inside.mean()))
+        last_geo = (geo, aggs)
+        if not np.any(geo.pspeed > 0):
+            # no speeds yet (the first frame of a run: the speed window has not elapsed): geometry only
+            no_speed.append(geo.t_min)
+            per_frame.append([])
+            continue
+        for a in aggs:
             sprof[0] += a["_speed_prof"][0]
             sprof[1] += a["_speed_prof"][1]
             if "_strain_prof" in a:
                 have_strain = True
                 eprof[0] += a["_strain_prof"][0]
                 eprof[1] += a["_strain_prof"][1]
-        ts["n_aggregates"].append(len(aggs))
-        ts["fraction_in_aggregates"].append(float(inside.mean()))
         sp = np.clip(geo.cspeed, 0, hist_edges[-1] - 1e-9)
         h_in += np.histogram(sp[inside], bins=hist_edges)[0]
         h_out += np.histogram(sp[~inside], bins=hist_edges)[0]
@@ -669,13 +680,13 @@ def analyze_frames(frames: Iterable[Frame], v_b: float = 4.0, **params) -> dict:
         per_frame.append(aggs)
         if aggs:
             last_agg_frame = (geo, aggs)
-        last_geo = (geo, aggs)
     if meta is None:
         raise ValueError("no frames to analyse")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)      # NaN means/medians of empty or all-NaN lists
         summary = _summarise(P, v_b, t0, ts, per_frame, size_dist, sbins, hist_edges, h_in, h_out, s_io, sprof,
                              eprof, have_strain, meta, last_agg_frame)
+    summary["meta"]["frames_without_speed_min"] = no_speed
     summary["_last"] = last_geo
     summary["_last_agg"] = last_agg_frame
     return summary
@@ -1026,6 +1037,15 @@ def _plots(s: dict, base: str) -> list[str]:
     p = geo.pos - shift
     segs = np.stack([p[:, :-1], p[:, 1:]], axis=2).reshape(-1, 2, 2)
     spd = (0.5 * (geo.pspeed[:, 1:] + geo.pspeed[:, :-1])).ravel()
+    out = (segs < 0).any(axis=(1, 2)) | (segs >= L).any(axis=(1, 2))       # periodic copies of crossing segments
+    if out.any():
+        cs, cv = [segs], [spd]
+        for ox in (-L[0], 0.0, L[0]):
+            for oy in (-L[1], 0.0, L[1]):
+                if ox or oy:
+                    cs.append(segs[out] + np.array([ox, oy]))
+                    cv.append(spd[out])
+        segs, spd = np.concatenate(cs), np.concatenate(cv)
     lw = max(0.3, 8 * 72 * geo.W / L[0] * 0.8)
     lc = LineCollection(segs, array=spd, cmap="jet", norm=plt.Normalize(0, 4 * vb), linewidths=lw)
     ax.add_collection(lc)

@@ -28,7 +28,7 @@ def init(arch: str = "cpu", threads: int | None = None, fallback: bool = True, q
     arches = {"cpu": ti.cpu, "cuda": ti.cuda, "vulkan": ti.vulkan, "metal": ti.metal, "gpu": ti.gpu}
     if arch not in arches:
         raise BackendError(f"--arch {arch!r}: allowed values are cpu, cuda, vulkan, metal, gpu")
-    kw = dict(cpu_max_num_threads=threads, offline_cache=True, log_level=ti.WARN if quiet else ti.INFO,
+    kw = dict(cpu_max_num_threads=threads, offline_cache=True, log_level=ti.ERROR if quiet else ti.INFO,
               default_fp=ti.f64 if fp == "f64" else ti.f32, random_seed=0)
     used = arch
     if arch != "cpu":

@@ -257,3 +257,23 @@ def test_paper_scale_speed(tmp_path):
     print(f"\nanalysis of {n_frames} frames x 2000 cells: {dt:.2f} s ({dt / n_frames * 1000:.0f} ms/frame)")
     assert s["n_aggregates_final"] == 10
     assert dt / n_frames < 0.5          # generous (measured ~35 ms/frame on 2 cores): catches O(n^2) regressions
+
+
+def test_first_frame_without_speeds_is_geometry_only(tmp_path):
+    """A run's first frame has no speeds yet: it counts for the aggregate number, not for speeds or tracks."""
+    import dataclasses
+
+    from taichimyxo.trajectory import TrajectoryWriter
+    disk = dict(centre=(50.0, 50.0), radius=8.25, omega=0.8)
+    frames = list(synthetic_frames(box=(100.0, 100.0), n_frames=3, disks=[disk]))
+    frames[0] = dataclasses.replace(frames[0], particle_speed=np.zeros_like(frames[0].particle_speed))
+    path = str(tmp_path / "run.gsd")
+    with TrajectoryWriter(path, {"cell": {"particles": 8, "speed_um_per_min": V_B}}) as w:
+        for fr in frames:
+            w.append(fr)
+    s = analyze(path, plots=False)
+    assert s["timeseries"]["n_aggregates"] == [1, 1, 1]
+    assert s["meta"]["frames_without_speed_min"] == [0.0]
+    (t,) = s["tracks"]
+    assert t["n_frames"] == 2 and t["first_time_min"] == 1.0
+    assert t["mean_omega_rad_per_min"] == pytest.approx(0.8, rel=1e-3)

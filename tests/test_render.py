@@ -52,9 +52,9 @@ def test_speed_scale_is_turbo_linear_0_16():
 
 def test_strain_scale_is_log10_with_zero_at_bottom():
     sc = strain_scale()
-    assert (sc.vmin, sc.vmax) == (1e-20, 1e-16)
-    e = np.array([0.0, 1e-25, 1e-20, 1e-19, 1e-18, 1e-17, 1e-16, 1e-12])
-    x = np.clip((np.log10(np.maximum(e, 1e-30)) + 20.0) / 4.0, 0, 1)
+    assert (sc.vmin, sc.vmax) == (1e-21, 1e-17)
+    e = np.array([0.0, 1e-25, 1e-21, 1e-20, 1e-19, 3e-19, 1e-18, 1e-17, 1e-12])
+    x = np.clip((np.log10(np.maximum(e, 1e-30)) + 21.0) / 4.0, 0, 1)
     assert np.array_equal(sc.rgb(e), turbo(x))
     assert np.array_equal(sc.rgb([0.0])[0], turbo(0.0))
     assert sc.label == "strain energy, J"
@@ -122,7 +122,7 @@ def test_strain_colours_a_known_overlap():
     fr = make_frame([a, b, c], [4.0, 4.0, 4.0], strain=[[e_seg], [e_seg], [0.0]])
     img = render_frame(fr, size=SIZE, color="strain")
     vp = get_renderer(BOX, SIZE, "strain").viewport
-    x = (np.log10(e_seg) + 20.0) / 4.0
+    x = (np.log10(e_seg) + 21.0) / 4.0
     assert np.array_equal(pixel(img, vp, (10.0, 9.95)), turbo(x))         # cell a, on the side away from b
     assert np.array_equal(pixel(img, vp, (10.0, 10.45)), turbo(x))        # cell b
     assert np.array_equal(pixel(img, vp, (10.0, 4.0)), turbo(0.0))        # no overlap: bottom colour
@@ -179,6 +179,16 @@ def test_time_is_shown_as_h_mm():
     assert diff.any() and not diff[vp.slices].any()                        # only the time text changed
 
 
+def test_title_is_drawn_under_the_box_only():
+    fr = make_frame([straight_cell((6, 10), (14, 10))], [3.0])
+    a = render_frame(fr, size=SIZE)
+    b = render_frame(fr, size=SIZE, title="S3")
+    vp = get_renderer(BOX, SIZE, "speed", title="S3").viewport
+    diff = np.any(a != b, axis=-1)
+    rows = np.nonzero(diff)[0]
+    assert len(rows) and rows.min() > vp.row0 + vp.height
+
+
 # ------------------------------------------------------------------------------------------------ files
 
 def _frames(n=4, box=BOX):
@@ -195,7 +205,7 @@ def test_mp4_opens_with_expected_frames_and_size(tmp_path):
 
     path = tmp_path / "movie.mp4"
     frames = _frames(5)
-    with VideoWriter(path, size=(321, 241), fps=10) as vw:
+    with VideoWriter(path, size=(321, 241), fps=10, title="test") as vw:
         assert vw.size == (322, 242)                                      # forced even for yuv420p
         for fr in frames:
             vw.append(fr)
@@ -212,7 +222,7 @@ def test_mp4_opens_with_expected_frames_and_size(tmp_path):
     assert imgs[0].shape == (242, 322, 3)
     assert meta["codec"] == "h264" and abs(meta["fps"] - 10) < 1e-6
     # the decoded picture is the rendered one, up to compression
-    ref = render_frame(frames[-1], size=(322, 242)).astype(int)
+    ref = render_frame(frames[-1], size=(322, 242), title="test").astype(int)
     assert np.abs(imgs[-1].astype(int) - ref).mean() < 6
     with pytest.raises(ValueError):
         vw.append(frames[0])
@@ -258,11 +268,11 @@ def test_render_trajectory_equals_render_frame(tmp_path):
     size = (256, 282)
     for color in ("speed", "strain"):
         n = render_trajectory(gsd, tmp_path / f"{color}.mp4", color=color, size=size, fps=5,
-                              png_path=tmp_path / f"{color}.png", png_size=size, progress=False)
+                              png_path=tmp_path / f"{color}.png", png_size=size, progress=False, title="traj")
         assert n == 3
         assert verify_video(tmp_path / f"{color}.mp4") == 3
         png = iio.imread(tmp_path / f"{color}.png")[..., :3]
-        assert np.array_equal(png, render_frame(frames[-1], size=size, color=color))
+        assert np.array_equal(png, render_frame(frames[-1], size=size, color=color, title="traj"))
     for fr, back in zip(frames, read_frames(str(gsd))):
         assert np.array_equal(render_frame(back, size=size), render_frame(fr, size=size))
     assert render_trajectory(gsd, tmp_path / "every2.mp4", size=size, every=2, progress=False) == 2

@@ -1,0 +1,237 @@
+"""Short-range guiding (MODEL.md term 5), slime trails (term 6), reversals (term 7), strain energy, and effects
+compiled only where a scene uses them."""
+import math
+
+import numpy as np
+import pytest
+
+from simtools import arc_cell, cell, scene, sim_with
+from taichimyxo.sim import make_simulation
+
+W = 0.5
+L0 = 4.5 / 7
+V_B = 4.0    # µm/min
+
+
+def in_line(gap, leader_x=12.0, y=10.0, lateral=0.0):
+    """Leader and follower along +x, both k_e = +1 (particle 0 leads), head-to-tail distance W + gap."""
+    leader = cell((leader_x, y), 180.0)                       # particle 0 at +x
+    f_centre = leader_x - 4.5 - W - gap
+    follower = cell((f_centre, y + lateral), 180.0)
+    return np.stack([leader, follower])
+
+
+def centroid_velocity(sim, steps=20):
+    p0 = sim.positions().mean(1)
+    t0 = sim.time
+    sim.run(steps)
+    return (sim.positions().mean(1) - p0) / (sim.time - t0) * 60.0      # µm/min, (n_cells, 2)
+
+
+@pytest.mark.parametrize("distance", ["segments", "particles"])
+def test_active_following_pulls_the_follower_up_to_3_v_b(distance):
+    g = 0.249
+    sim = sim_with(in_line(g), guiding={"kind": "active", "distance": distance}, run={"precision": "f64"})
+    v = centroid_velocity(sim, 5)
+    expected = (100 + 800 * g) / 100 * V_B             # engine 100 pN + pull k_g g, shared by the whole cell
+    assert v[1, 0] == pytest.approx(expected, rel=0.01)
+    assert v[1, 0] > 2.9 * V_B
+    assert v[0, 0] == pytest.approx(V_B, rel=0.01)     # active following: the leader is not affected
+    # over 30 s the follower catches up and stays within guiding range, never overtaking
+    gaps = []
+    for _ in range(30):
+        sim.run(1000)
+        p = sim.positions()
+        gaps.append(np.linalg.norm(p[0, -1] - p[1, 0]) - W)
+    assert max(gaps) < 0.25 and min(gaps) > -0.05
+    sim.close()
+
+
+def test_adhesion_also_slows_the_leader():
+    g = 0.2
+    # the leader's net force is a small difference (100 - 160 pN): measure over 0.2 ms, before the gap changes
+    sim = sim_with(in_line(g), guiding={"kind": "adhesion"}, run={"precision": "f64", "dt_ms": 0.1})
+    v = centroid_velocity(sim, 2)
+    assert v[1, 0] == pytest.approx((100 + 800 * g) / 100 * V_B, rel=0.01)
+    assert v[0, 0] == pytest.approx((100 - 800 * g) / 100 * V_B, rel=0.01)
+    sim.close()
+
+
+@pytest.mark.parametrize("distance", ["segments", "particles"])
+def test_passive_following_turns_but_never_speeds_up(distance):
+    sim = sim_with(in_line(0.15, lateral=0.25), guiding={"kind": "passive", "distance": distance},
+                   run={"precision": "f64"})
+    p = sim.positions()
+    heading0 = p[1, 0] - p[1, 1]
+    axial = []
+    for _ in range(40):
+        p0 = sim.positions()
+        sim.run(50)
+        p1 = sim.positions()
+        axis = p0[1, 0] - p0[1, -1]
+        axis /= np.linalg.norm(axis)
+        vel = (p1[1].mean(0) - p0[1].mean(0)) / (50 * sim.cfg.dt) * 60
+        axial.append(np.dot(vel, axis))
+    p = sim.positions()
+    heading1 = p[1, 0] - p[1, 1]
+    turn = math.atan2(heading1[1], heading1[0]) - math.atan2(heading0[1], heading0[0])
+    assert turn < -0.01                                 # turned toward the leader's tail (which is at -y)
+    assert max(axial) <= V_B * 1.002
+    sim.close()
+
+
+def test_guiding_across_the_periodic_boundary_equals_inside():
+    pos = in_line(0.2, lateral=0.1)
+    ref = sim_with(pos, guiding={"kind": "adhesion"}, run={"precision": "f64"})
+    f_ref = ref.forces()["total"]
+    ref.close()
+    shift = np.array([20.0, 20.0]) - pos[0, -1] + np.array([0.05, 0.03])     # the leader's tail just inside a corner
+    moved = np.mod(pos + shift, 20.0)
+    sim = sim_with(moved, guiding={"kind": "adhesion"}, run={"precision": "f64"})
+    np.testing.assert_allclose(sim.forces()["total"], f_ref, rtol=1e-9, atol=1e-9)
+    sim.close()
+
+
+def _ring(gap=0.1):
+    # radius such that the head-to-tail chord across the opening is W + gap
+    def opening(R):
+        dth = 2 * math.asin(L0 / (2 * R))
+        return 2 * R * math.sin((2 * math.pi - 7 * dth) / 2) - (W + gap)
+    lo, hi = 0.75, 3.0
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if opening(mid) < 0 else (lo, mid)
+    return arc_cell((10, 10), 0.5 * (lo + hi), 0.0)
+
+
+@pytest.mark.parametrize("distance", ["segments", "particles"])
+def test_a_cell_bent_into_a_ring_follows_its_own_tail(distance):
+    pos = _ring(0.1)
+    d = np.linalg.norm(pos[0] - pos[-1]) - W
+    assert d == pytest.approx(0.1, abs=1e-6)
+    f = {}
+    for self_ in (True, False):
+        sim = sim_with(pos, guiding={"kind": "active", "distance": distance, "self": self_},
+                       cell={"k_a_N_m": 1e-18}, run={"precision": "f64"})
+        f[self_] = sim.forces()["total"][0, 0]
+        sim.close()
+    pull = f[True] - f[False]
+    towards_tail = (pos[-1] - pos[0]) / np.linalg.norm(pos[-1] - pos[0])
+    assert np.linalg.norm(pull) > 0.5 * 800 * 0.1
+    assert np.dot(pull, towards_tail) > 0.9 * np.linalg.norm(pull)
+
+
+@pytest.mark.parametrize("trail_sign", [1.0, -1.0])
+def test_a_cell_crossing_a_slime_trail_at_30_degrees_turns_onto_it(trail_sign):
+    c = cell((6.0, 8.3), 30.0 + 180.0)          # particle 0 leads toward +30 degrees, 1.5 µm below the trail
+    sim = sim_with(c, box=(40.0, 20.0), slime={"enabled": True}, cell={"k_a_N_m": 1e-16},
+                   run={"dt_ms": 2.0})
+    grid = np.zeros((sim.sgx, sim.sgy, 2), np.float32)
+    rows = slice(int(9.75 / 0.25), int(10.25 / 0.25))
+    grid[:, rows, 0] = trail_sign
+    sim.slime.from_numpy(grid)
+    sim.run(30000)                               # 60 s: the cell reaches the trail and follows it
+    p = sim.positions()[0]
+    heading = p[0] - p[1]
+    angle = math.degrees(math.atan2(heading[1], heading[0]))
+    assert abs(angle) < 8.0                      # moving along the trail, in its own (acute) direction
+    assert abs(np.mod(p[:, 1].mean(), 20.0) - 10.0) < 0.6
+    sim.close()
+
+
+def test_deposition_writes_the_rear_tangent_under_the_rear_particle():
+    c = cell((10.0, 10.0), 37.0)
+    for ke in (1, -1):
+        sim = sim_with(c, ke=[ke], slime={"enabled": True})
+        sim.run(1)
+        p = sim.positions()[0]
+        rear, nxt = (p[-1], p[-2]) if ke > 0 else (p[0], p[1])
+        t = (nxt - rear) / np.linalg.norm(nxt - rear)
+        grid = sim.slime.to_numpy()
+        ix, iy = (np.floor(np.mod(rear, 20.0) / 0.25)).astype(int)
+        np.testing.assert_allclose(grid[ix, iy], t, atol=1e-6)
+        assert np.count_nonzero(np.abs(grid).sum(-1)) == 1
+        sim.close()
+
+
+def test_observed_reversal_intervals_match_the_period_distribution():
+    T = 3.0                                      # s
+    sim = make_simulation(scene(box=(60.0, 60.0), cells=60, reversals={"enabled": True, "period_min": T / 60},
+                                run={"dt_ms": 2.0}))
+    ke_prev = sim.engine_direction()
+    last = np.full(60, np.nan)
+    intervals = []
+    for _ in range(6000):                        # 60 s
+        sim.run(5)
+        ke = sim.engine_direction()
+        flipped = np.nonzero(ke != ke_prev)[0]
+        for c in flipped:
+            if not np.isnan(last[c]):
+                intervals.append(sim.time - last[c])
+            last[c] = sim.time
+        ke_prev = ke
+    intervals = np.array(intervals)
+    assert len(intervals) > 800
+    assert intervals.mean() == pytest.approx(T, rel=0.03)
+    assert intervals.std() == pytest.approx(0.24 * T, rel=0.12)
+    assert intervals.min() >= 0.1 * T - 0.011
+    sim.close()
+
+
+@pytest.mark.parametrize("suppression", [True, False])
+def test_suppression_skips_reversals_during_head_to_tail_interaction_only(suppression):
+    pair = in_line(0.1, leader_x=10.0)
+    loner = cell((10.0, 18.0), 0.0)[None]
+    sim = sim_with(np.concatenate([pair, loner]), box=(30.0, 30.0), guiding={"kind": "active"},
+                   reversals={"enabled": True, "period_min": 1.0 / 60, "suppression": suppression})
+    flips = np.zeros(3, int)
+    prev = sim.engine_direction()
+    for _ in range(500):                          # 5 s
+        sim.run(10)
+        ke = sim.engine_direction()
+        flips += ke != prev
+        prev = ke
+    assert flips[2] >= 3                          # the free cell reverses about every second
+    if suppression:
+        assert flips[0] == 0 and flips[1] == 0    # leader and follower interact the whole time
+    else:
+        assert flips[0] >= 2 and flips[1] >= 2
+    sim.close()
+
+
+def test_strain_energy_of_a_known_overlap_is_split_in_halves():
+    a = cell((10, 10), 0.0)
+    depth = 0.12
+    tip = np.array([a[3, 0] + 0.3, 10 + W - depth])
+    b = tip[None, :] + np.arange(8)[:, None] * np.array([0.0, L0])[None, :]
+    sim = sim_with(np.stack([a, b]), output={"strain": True}, run={"precision": "f64"})
+    e = sim.segment_strain()
+    total = 0.5 * sim.cfg.k_c * depth ** 2 * 1e-18          # J
+    assert e.sum() == pytest.approx(total, rel=1e-9)
+    assert e[0, 3] == pytest.approx(total / 2, rel=1e-9)
+    assert e[1, 0] == pytest.approx(total / 2, rel=1e-9)
+    sim.close()
+
+
+EFFECT_FIELDS = {"g_head", "g_tail", "interacting", "rev_clock", "rev_period", "rev_count", "slime", "slime_claim",
+                 "strain_seg", "v"}
+
+
+@pytest.mark.parametrize("name,expected", [
+    ("S1", set()),
+    ("S2", {"g_head"}),
+    ("S4", {"g_head", "g_tail"}),
+    ("S8", {"g_head", "strain_seg"}),
+    ("S15", {"g_head", "interacting", "rev_clock", "rev_period", "rev_count"}),
+    ("S17", {"slime", "slime_claim"}),
+])
+def test_only_the_effects_a_scene_uses_are_allocated(name, expected):
+    from taichimyxo.scene import Scene
+    sc = Scene.load(name, {"domain": {"width_um": 20.0, "height_um": 20.0}, "population": {"cells": 4},
+                           "output": {"movie": False}})
+    sim = make_simulation(sc)
+    have = {k for k in sim.allocated_fields() if k in EFFECT_FIELDS}
+    assert have == expected
+    for k in EFFECT_FIELDS - expected:
+        assert getattr(sim, k) is None
+    sim.close()
