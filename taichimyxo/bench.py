@@ -1,0 +1,108 @@
+"""Benchmarks: `python -m taichimyxo bench throughput|accuracy|stability`.
+
+throughput: particle-steps per second per scene and size, measured in one run, plus the cost of each effect as a
+ratio to the non-guided scene (S1) on the same start. Writes benchmarks/results/throughput.csv and prints a table.
+Rates, never timed asserts: these machines are shared and noisy; ratios within one run are what to compare."""
+from __future__ import annotations
+
+import csv
+import os
+import platform
+import time
+from pathlib import Path
+
+# (scene, what it adds over S1)
+SCENES = [
+    ("S1", "baseline: springs, bending, engine, contacts"),
+    ("S2", "passive following"),
+    ("S3", "active following"),
+    ("S4", "adhesion"),
+    ("S15", "active following + reversals + suppression"),
+    ("S17", "slime trails"),
+    ("S11", "high density, aligned (k_c = 0.002 N/m)"),
+]
+
+
+def _measure(name: str, scale: float, steps: int, warm: int, precision: str | None = None,
+             integrator: str | None = None) -> dict:
+    from .scene import Scene
+    from .sim import make_simulation
+    over = {"output": {"movie": False}}
+    if scale != 1.0:
+        sc0 = Scene.load(name)
+        over["domain"] = {"width_um": sc0.box[0] * scale, "height_um": sc0.box[1] * scale}
+        if sc0.raw["population"]["cells"]:
+            over["population"] = {"cells": max(1, round(sc0.n_cells * scale * scale))}
+    if precision:
+        over.setdefault("run", {})["precision"] = precision
+    if integrator:
+        over.setdefault("run", {})["integrator"] = integrator
+    sc = Scene.load(name, over)
+    t0 = time.perf_counter()
+    sim = make_simulation(sc)
+    sim.run(warm)                                   # compiles and settles the neighbour list
+    setup = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    sim.run(steps)
+    wall = time.perf_counter() - t0
+    row = {"scene": name, "scale": scale, "cells": sc.n_cells, "particles": sim.n_p, "precision": sc.precision,
+           "integrator": sc.integrator, "dt_ms": sc.dt * 1e3, "steps": steps, "wall_s": round(wall, 4),
+           "steps_per_s": round(steps / wall, 1), "particle_steps_per_s": round(steps * sim.n_p / wall),
+           "simulated_s_per_wall_s": round(steps * sc.dt / wall, 3), "setup_s": round(setup, 2),
+           "rebuilds": sim.rebuilds, "serial_loops": sim.serial}
+    sim.close()
+    return row
+
+
+def throughput(quick: bool = False, out_dir: str = "benchmarks/results") -> list[dict]:
+    from . import backend
+    backend.init("cpu")
+    rows = []
+    sizes = [1.0] if quick else [1.0, 0.5, 0.25]
+    steps = 500 if quick else 2000
+    for scale in sizes:
+        base = None
+        for name, what in SCENES:
+            if quick and name not in ("S1", "S3", "S17"):
+                continue
+            r = _measure(name, scale, steps=steps if scale == 1.0 else steps * 4, warm=200)
+            r["adds"] = what
+            if name == "S1":
+                base = r["steps_per_s"]
+            r["cost_vs_S1"] = round(base / r["steps_per_s"], 3) if base and name != "S11" else ""
+            rows.append(r)
+            print(f"{name:>4} x{scale:<5} {r['cells']:>5} cells {r['particles']:>6} particles "
+                  f"{r['steps_per_s']:>8.0f} steps/s {r['particle_steps_per_s'] / 1e6:6.2f} M particle-steps/s "
+                  f"cost vs S1 {r['cost_vs_S1'] or '-':>6}  ({what})", flush=True)
+    if not quick:
+        for prec in ("f32", "f64"):
+            r = _measure("S1", 1.0, steps=steps, warm=200, precision=prec)
+            r["adds"] = f"S1 in {prec}"
+            r["cost_vs_S1"] = round(rows[0]["steps_per_s"] / r["steps_per_s"], 3)
+            rows.append(r)
+            print(f"  S1 {prec}: {r['particle_steps_per_s'] / 1e6:6.2f} M particle-steps/s, cost vs mixed "
+                  f"{r['cost_vs_S1']}", flush=True)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / ("throughput_quick.csv" if quick else "throughput.csv")
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0].keys()))
+        w.writeheader()
+        w.writerows(rows)
+    with open(path.with_suffix(".txt"), "w") as f:
+        f.write(f"machine: {platform.machine()} {os.cpu_count()} cores, {platform.python_version()}, "
+                f"{time.strftime('%Y-%m-%d %H:%M')}\n")
+    print(f"wrote {path}")
+    return rows
+
+
+def main(which: str, quick: bool = False, out_dir: str = "benchmarks/results") -> int:
+    if which == "throughput":
+        throughput(quick, out_dir)
+        return 0
+    from . import bench_accuracy
+    if which == "accuracy":
+        return bench_accuracy.main(quick=quick, out_dir=out_dir)
+    if which == "stability":
+        return bench_accuracy.stability_main(quick=quick, out_dir=out_dir)
+    raise ValueError(which)

@@ -1,0 +1,66 @@
+"""Regenerate the supplementary videos: `python -m taichimyxo videos [--preview] [--only S3,S8]`.
+
+Runs S1-S17 in order, each in its own process (one Simulation per process: Taichi compiles per instance), skips
+those whose outputs are up to date (same scene fingerprint, completed), resumes an interrupted one from its
+checkpoint, and shows overall progress. Ctrl-C stops after closing the current run's files; run again to continue."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from .scene import Scene, SceneError
+
+VIDEO_SCENES = [f"S{i}" for i in range(1, 18)]
+
+
+def _up_to_date(sc: Scene, out: Path) -> bool:
+    js = out / f"{sc.name}.json"
+    mp4 = out / f"{sc.name}.mp4"
+    if not (js.is_file() and mp4.is_file()):
+        return False
+    try:
+        d = json.loads(js.read_text())
+    except ValueError:
+        return False
+    if d.get("fingerprint") != sc.fingerprint() or not d.get("completed"):
+        return False
+    if d.get("status") == "rendered from trajectory":
+        return True
+    return d.get("simulated_seconds", 0.0) + sc.dt >= sc.hours * 3600
+
+
+def regenerate(preview: bool = False, only: str | None = None, out_dir: str = "videos", arch: str = "cpu") -> int:
+    names = VIDEO_SCENES
+    if only:
+        names = [n.strip() for n in only.split(",") if n.strip()]
+        unknown = [n for n in names if n not in VIDEO_SCENES]
+        if unknown:
+            raise SceneError(f"--only: unknown video {', '.join(unknown)}; available: S1-S17")
+    from .run import check_output_dir
+    out = check_output_dir(out_dir)
+    scenes = [Scene.load(n, {}, preview=preview) for n in names]      # validate all before running any
+    todo = [sc for sc in scenes if not _up_to_date(sc, out)]
+    print(f"videos: {len(scenes) - len(todo)} of {len(scenes)} up to date in {out}; {len(todo)} to make",
+          flush=True)
+    t0 = time.time()
+    for i, sc in enumerate(todo, 1):
+        name = sc.name[:-len("-preview")] if preview and sc.name.endswith("-preview") else sc.name
+        cmd = [sys.executable, "-m", "taichimyxo", "scene", name, "--out", str(out), "--arch", arch]
+        if preview:
+            cmd.append("--preview")
+        if (out / f"{sc.name}.ckpt.npz").is_file():
+            cmd.append("--resume")
+        print(f"[{i}/{len(todo)}] {sc.name}: {sc.raw['scene']['title']} "
+              f"(elapsed {time.time() - t0:.0f} s)", flush=True)
+        try:
+            rc = subprocess.call(cmd)
+        except KeyboardInterrupt:
+            rc = 130
+        if rc != 0:
+            print(f"videos: {sc.name} stopped (exit {rc}); run the same command again to continue", file=sys.stderr)
+            return rc
+    print(f"videos: done in {time.time() - t0:.0f} s", flush=True)
+    return 0
