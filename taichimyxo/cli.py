@@ -24,6 +24,19 @@ class _Parser(argparse.ArgumentParser):
         raise SystemExit(EXIT_BAD_INPUT)
 
 
+ARCHES = ("cpu", "cuda", "vulkan", "metal", "gpu")       # as backend.init accepts them
+
+
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"{v} must be at least 1")
+    return v
+
+
 def _build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="python -m taichimyxo", description="Myxobacteria guiding simulator (Taichi).")
     sub = p.add_subparsers(dest="cmd", required=True, parser_class=_Parser)
@@ -39,8 +52,9 @@ def _build_parser() -> argparse.ArgumentParser:
     s.add_argument("--seed", type=int, help="random seed (overrides run.seed)")
     s.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override any scene key by its dotted name, e.g. --set guiding.kind=active")
-    s.add_argument("--arch", default="cpu", help="cpu (default), cuda, vulkan; unavailable GPUs fall back to cpu")
-    s.add_argument("--threads", type=int, help="CPU threads (default: all cores)")
+    s.add_argument("--arch", default="cpu", choices=ARCHES,
+                   help="cpu (default), cuda, vulkan, metal, gpu; unavailable GPUs fall back to cpu")
+    s.add_argument("--threads", type=_positive_int, help="CPU threads (default: all cores)")
     s.add_argument("--resume", action="store_true", help="continue an interrupted run from its checkpoint")
     s.add_argument("--force", action="store_true", help="run even if the time step exceeds the stability limit")
     s.add_argument("--no-movie", action="store_true", help="trajectory and summary only")
@@ -66,7 +80,7 @@ def _build_parser() -> argparse.ArgumentParser:
     v.add_argument("--preview", action="store_true")
     v.add_argument("--only", help="comma-separated scene names, e.g. S3,S8")
     v.add_argument("--out", default="videos")
-    v.add_argument("--arch", default="cpu")
+    v.add_argument("--arch", default="cpu", choices=ARCHES)
 
     b = sub.add_parser("bench", help="benchmarks: throughput, accuracy, stability")
     b.add_argument("which", choices=["throughput", "accuracy", "stability"])

@@ -97,7 +97,7 @@ def _progress(total, initial, desc, enabled):
         return None
     from tqdm import tqdm
     return tqdm(total=total, initial=initial, desc=desc, unit="step", unit_scale=True, dynamic_ncols=True,
-                mininterval=1.0, file=sys.stderr, smoothing=0.1)
+                mininterval=1.0 if sys.stderr.isatty() else 30.0, file=sys.stderr, smoothing=0.1)
 
 
 def _hm(seconds: float) -> str:
@@ -129,13 +129,25 @@ def run_scene(scene: Scene, out_dir: str = "videos", arch: str = "cpu", resume: 
         if str(ckpt.get("fingerprint")) != scene.fingerprint():
             raise SceneError(f"--resume: {files['ckpt']} was written for different scene parameters")
 
+    # place the cells before Taichi starts: a density the start cannot place is bad input (one line, exit 2), and a
+    # resumed run takes its state from the checkpoint instead of placing cells it would throw away
+    if ckpt is not None:
+        positions, engine_direction = ckpt["x"], ckpt["ke"]
+    else:
+        from .init import PlacementError, initial_configuration
+        try:
+            positions, engine_direction = initial_configuration(scene)
+        except PlacementError as e:
+            raise SceneError(f"population: the {scene.start!r} start cannot place the cells ({e}); lower "
+                             f"population.density_cells_per_cm2 or population.cells, or enlarge the domain") from None
+
     from . import backend
     used_arch = backend.init(arch, threads, default_fp="f64" if scene.precision == "f64" else None)
     from .sim import make_simulation
     from .trajectory import TrajectoryWriter
 
     t_setup = time.perf_counter()
-    sim = make_simulation(scene)
+    sim = make_simulation(scene, positions=positions, engine_direction=engine_direction)
     if ckpt is not None:
         sim.load_checkpoint(ckpt)
     setup_s = time.perf_counter() - t_setup
@@ -170,9 +182,11 @@ def run_scene(scene: Scene, out_dir: str = "videos", arch: str = "cpu", resume: 
     last_frame = None
     last_ckpt = time.perf_counter()
     status = "completed"
-    bar = _progress(total, sim.step_count, name, progress)
+    bar = None
     try:
         with _Interrupt() as intr:
+            # the bar appears once signals are caught: from then on Ctrl-C always ends in a checkpoint
+            bar = _progress(total, sim.step_count, name, progress)
             if sim.step_count == 0:
                 last_frame = emit()
             while sim.step_count < total:

@@ -250,7 +250,8 @@ class Scene:
         """Cross-key checks (single keys were checked on merge)."""
         Lx, Ly = self.box
         if min(Lx, Ly) < 2 * self.length:
-            raise SceneError(f"domain {Lx:g} x {Ly:g} µm is smaller than two cell lengths ({2 * self.length:g} µm)")
+            raise SceneError(f"domain.width_um x domain.height_um = {Lx:g} x {Ly:g} µm: each side must be at least two "
+                             f"cell lengths (2 x cell.length_um = {2 * self.length:g} µm)")
         if self.width >= self.length:
             raise SceneError(f"cell.width_um = {self.width:g} must be smaller than cell.length_um = {self.length:g}")
         if self.n_cells < 1:
@@ -258,8 +259,12 @@ class Scene:
         af = self.n_cells * self.length * self.width / (Lx * Ly)
         limit = {"random": 0.5, "aligned": 1.0 + 1e-9, "spiral": 0.9}[self.start]
         if af > limit:
-            raise SceneError(f"population: {self.n_cells} cells cover {af:.2f} of the area; the {self.start!r} start "
-                             f"can place at most {limit:.2f}")
+            c = self.raw["population"]["cells"]
+            given = (f"population.cells = {c}" if c else
+                     f"population.density_cells_per_cm2 = {self.raw['population']['density_cells_per_cm2']:g} "
+                     f"({self.n_cells} cells in {Lx:g} x {Ly:g} µm)")
+            raise SceneError(f"{given} covers {af:.2f} of the area; the {self.start!r} start can place at most "
+                             f"{limit:.2f}")
         if self.start == "spiral":
             from .init import spiral_capacity
             cap = spiral_capacity(self)

@@ -397,18 +397,25 @@ class Simulation:
 
     # ------------------------------------------------------------------ contacts: MODEL.md term 4
     @ti.func
-    def _node_owned(self, k, P, x_node, other, prev_dir):
+    def _node_owned(self, k, P, x_node, other, prev_dir, same_cell, k_other):
         """Contact-point ownership (the S1 Text fixes, MODEL.md term 4). A contact clamped to an interior node
         belongs to exactly one of the two segments sharing it: the later segment (P = 0), and only when the other
         body lies beyond the earlier segment's end (the convex wedge); otherwise the earlier segment sees the same
         contact in its interior. This counts a node contact once and leaves no tangential force (no washboard)
-        when a cell slides along a straight neighbour."""
+        when a cell slides along a straight neighbour. Exception: when the would-be owner is adjacent to the other
+        segment of the same cell (a hairpin: segments k and k + 2 meeting at the node of k + 1), the owner never
+        sees that pair, so the contact stays with this segment rather than being lost."""
         ok = True
+        owner = k
         if P >= 1.0 and k < self.cfg.N - 2:
             ok = False
+            owner = k + 1
         elif P <= 0.0 and k > 0:
             if (other - x_node).dot(prev_dir) < 0.0:
                 ok = False
+                owner = k - 1
+        if not ok and same_cell and abs(owner - k_other) < 2:
+            ok = True
         return ok
 
     @ti.func
@@ -436,18 +443,16 @@ class Simulation:
             if dist < self.cfg.W:
                 ks = s % (self.cfg.N - 1)
                 kt = t % (self.cfg.N - 1)
-                ok = True
+                same = s // (self.cfg.N - 1) == t // (self.cfg.N - 1)
+                prev = ti.Vector([0.0, 0.0], dt=self.fdt)
                 if ks > 0:
                     prev = ti.cast(_min_image(xa - self.x[a - 1], self.cfg.Lx, self.cfg.Ly), self.fdt)
-                    ok = self._node_owned(ks, P, pa, c2, prev)
-                elif P >= 1.0 and ks < self.cfg.N - 2:
-                    ok = False
+                ok = self._node_owned(ks, P, pa, c2, prev, same, kt)
                 if ok:
+                    prev_t = ti.Vector([0.0, 0.0], dt=self.fdt)
                     if kt > 0:
-                        prev = pc - ti.cast(_min_image(self.x[c_ - 1] - xa, self.cfg.Lx, self.cfg.Ly), self.fdt)
-                        ok = self._node_owned(kt, Q, pc, c1, prev)
-                    elif Q >= 1.0 and kt < self.cfg.N - 2:
-                        ok = False
+                        prev_t = pc - ti.cast(_min_image(self.x[c_ - 1] - xa, self.cfg.Lx, self.cfg.Ly), self.fdt)
+                    ok = self._node_owned(kt, Q, pc, c1, prev_t, same, ks)
                 if ok:
                     if dist > 1e-9:
                         n = sep / dist

@@ -1,22 +1,29 @@
 """Shared fixtures.
 
-- `ti_cpu`: Taichi initialised once on the CPU with 2 threads (backend.init is a no-op when already so; it is called
-  per test so a test that re-initialised Taichi differently cannot leave the next one with dead fields).
+- `ti_session` / `ti_cpu`: Taichi on the CPU with 2 threads (TAICHIMYXO_THREADS, set here), initialised once per
+  session; `ti_cpu` re-asserts it per test (backend.init is a no-op when Taichi is already so), so a test that
+  re-initialised Taichi differently cannot leave the next one with dead fields.
 - `small_scene(cells=2, box=(20, 20), **sections)`: a validated Scene on a small periodic box with the movie off;
   sections are merged over it, e.g. small_scene(3, guiding={"kind": "active"}).
-- `make_sim(scene, positions=None, engine_direction=None)`: a Simulation closed (fields freed) after the test.
+- `make_sim(scene, positions=None, engine_direction=None)`: the scene integrator's Simulation (make_simulation),
+  closed (fields freed) after the test.
 - `shapes`: chains to place by hand (straight, arc, ring), in µm, for a scene's N and l0.
 - marker `slow`: tests that take more than a few seconds.
 """
 from __future__ import annotations
 
 import math
+import os
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from taichimyxo.scene import Scene
+
+# Tests run on 2 threads, also where run_scene or a subprocess initialises Taichi itself (backend.init reads this when
+# given no thread count), so that nothing re-initialises Taichi with another count and frees live fields.
+os.environ.setdefault("TAICHIMYXO_THREADS", "2")
 
 
 def pytest_configure(config):
@@ -31,11 +38,19 @@ def build_small_scene(cells: int = 2, box=(20.0, 20.0), **sections) -> Scene:
     return Scene.from_dict(data, where="test scene")
 
 
-@pytest.fixture
-def ti_cpu():
+@pytest.fixture(scope="session")
+def ti_session():
+    """Taichi initialised once per session on the CPU (2 threads)."""
     from taichimyxo import backend
-    backend.init("cpu", 2)
+    backend.init("cpu", int(os.environ["TAICHIMYXO_THREADS"]))
     return backend
+
+
+@pytest.fixture
+def ti_cpu(ti_session):
+    """ti_session, re-asserted per test (a no-op unless another test re-initialised Taichi differently)."""
+    ti_session.init("cpu", int(os.environ["TAICHIMYXO_THREADS"]))
+    return ti_session
 
 
 @pytest.fixture
@@ -45,11 +60,11 @@ def small_scene():
 
 @pytest.fixture
 def make_sim(ti_cpu):
-    from taichimyxo.sim import Simulation
+    from taichimyxo.sim import make_simulation
     made = []
 
     def make(scene, positions=None, engine_direction=None):
-        sim = Simulation(scene, positions=positions, engine_direction=engine_direction)
+        sim = make_simulation(scene, positions=positions, engine_direction=engine_direction)
         made.append(sim)
         return sim
 

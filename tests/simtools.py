@@ -53,12 +53,13 @@ def bend_energy(pos, k_a):
     return 0.5 * k_a * np.sum(th ** 2)
 
 
-def _owned(k, N, P, node, other, prev_dir):
+def _owned(k, N, P, node, other, prev_dir, same_cell, k_other):
+    owner = k
     if P >= 1.0 and k < N - 2:
-        return False
-    if P <= 0.0 and k > 0 and np.dot(other - node, prev_dir) < 0.0:
-        return False
-    return True
+        owner = k + 1
+    elif P <= 0.0 and k > 0 and np.dot(other - node, prev_dir) < 0.0:
+        owner = k - 1
+    return owner == k or (same_cell and abs(owner - k_other) < 2)
 
 
 def contact_pairs(pos, box, W):
@@ -79,12 +80,10 @@ def contact_pairs(pos, box, W):
                     P, Q, c1, c2, d = closest_points(a0, a1, b0, b1)
                     if d >= W:
                         continue
-                    pa = a0 - min_image(a0 - pos[ca, ka - 1], L) if ka > 0 else None
-                    pb = b0 - min_image(pos[cb, kb] - pos[cb, kb - 1], L) if kb > 0 else None
-                    ok = _owned(ka, N, P, a0, c2, a0 - pa if pa is not None else None) if ka > 0 else \
-                        not (P >= 1.0 and ka < N - 2)
-                    ok = ok and (_owned(kb, N, Q, b0, c1, b0 - pb) if kb > 0 else not (Q >= 1.0 and kb < N - 2))
-                    if ok:
+                    pa = min_image(a0 - pos[ca, ka - 1], L) if ka > 0 else np.zeros(2)
+                    pb = min_image(pos[cb, kb] - pos[cb, kb - 1], L) if kb > 0 else np.zeros(2)
+                    same = ca == cb
+                    if _owned(ka, N, P, a0, c2, pa, same, kb) and _owned(kb, N, Q, b0, c1, pb, same, ka):
                         out.append((ca, ka, cb, kb, float(d), float(P), float(Q)))
     return out
 

@@ -1,10 +1,13 @@
 """Issue 5, parts 1-2: hard cases stay numerically stable at the scene's default step.
 
 Every case runs the explicit integrator at the default step (scene.dt) and asserts, through
-taichimyxo.invariants.check_invariants, after every window of 1 simulated second (the displayed-speed window):
-finite positions, segment lengths within +-20 % of l0, windowed particle speed <= 5 v_b, no two segments of
-different cells (nor non-adjacent segments of one cell) closer than 0.3 W (why 0.3 W: invariants.py; the contact
-force there is 7-35 cells' engine force), and spring and contact energy that do not keep growing.
+taichimyxo.invariants.check_invariants after every window of 1 simulated second (the displayed-speed window):
+finite positions; segment lengths within +-20 % of l0; windowed cell-centre speed <= 5 v_b and particle speed
+<= 5 v_b (in scenes with guiding or slime, 5 v_b + F_max / (zeta_n v_b) = 37 v_b for particles: one-particle pulls
+swing heads faster, and test_particles_faster_than_5_vb_are_physical shows that is the model, not the step);
+no two segments of different cells (nor segments of one cell three or more apart) closer than 0.3 W (why 0.3 W:
+invariants.py; the contact force there is 7-35 cells' engine force); spring and contact energy that do not keep
+growing.
 """
 from __future__ import annotations
 
@@ -59,22 +62,31 @@ def test_checker_catches_an_unstable_step(small_scene, make_sim):
 
 
 # ------------------------------------------------------------------------------------------------- hard cases
+def _relax_then_check(sim, relax_steps, steps, **kw):
+    """A start far from mechanical equilibrium (a very rigid cell bent hard) relaxes at a physical speed above
+    5 v_b: check the relaxation every 50 steps with the speed bound off, then every invariant."""
+    relax = check_invariants(sim, relax_steps, window_steps=50,
+                             bounds=Bounds(speed_factor=math.inf, centre_speed_factor=math.inf))
+    mon = check_invariants(sim, steps, **kw)
+    print("relaxation:", relax.summary())
+    print(mon.summary())
+    return relax, mon
+
+
 def test_very_rigid_cells_at_the_default_step(small_scene, make_sim):
     """k_a = 1e-15 N·m (the stiffest bending mode): a strongly bent cell straightening, a head-on collision and a
-    crossing, at the scene's step."""
+    head driven into a cell's side at an angle, at the scene's step."""
     sc = small_scene(4, cell={"k_a_N_m": 1e-15})
-    cells = [arc((6, 6), 1.6, 0.0, N, L0),                                   # bent to 0.4 rad per joint
-             straight((13.0, 10.0), 0.0, N, L0), straight((13.0 + 4.5 + 0.4, 10.0), 0.0, N, L0),
-             straight((13.0, 14.0), 0.3, N, L0)]
+    th = math.pi / 2 + 0.3                                                  # the 4th cell moves down, tilted
+    cells = [arc((6, 6), 1.6, 0.0, N, L0),                                   # bent 0.4 rad at every joint
+             straight((13.0, 10.0), 0.0, N, L0), straight((13.0 + 4.5 + 0.4, 10.0), 0.0, N, L0),   # heads 0.4 apart
+             straight(np.array([13.0, 10.6]) + 0.5 * (N - 1) * L0 * np.array([math.cos(th), math.sin(th)]), th,
+                      N, L0)]                                 # head 0.6 µm from cell 2's axis (a 0.1 µm gap)
     sim = make_sim(sc, np.stack(cells), _ke(1, -1, 1, 1))
-    # The bent cell stores 490 pN·µm and unbends with ~600 pN at its joints: its ends legitimately move at ~15 v_b
-    # for a few ms (overdamped relaxation, rate 16 k_a / (l0^2 zeta_n) ~ 400/s). Check that relaxation every 10
-    # steps with the speed bound off, then everything.
-    relax = check_invariants(sim, 300, window_steps=10, bounds=Bounds(speed_factor=math.inf))
-    assert relax.records[-1]["e_bend"] < 0.1 * relax.records[0]["e_bend"]   # the bent cell straightened
-    mon = check_invariants(sim, 4000)
-    print(relax.summary())
-    print(mon.summary())
+    # The bent cell stores 490 pN·µm and unbends with ~600 pN at its joints: its ends move at ~15 v_b for a while
+    # (an overdamped relaxation, the same at dt / 4), so the speed bound starts after it.
+    relax, mon = _relax_then_check(sim, 1000, 4000)
+    assert relax.records[-1]["e_bend"] < 0.5 * relax.records[0]["e_bend"]   # the bent cell straightened
 
 
 @pytest.mark.parametrize("k_a,guiding", [(1e-17, "none"), (1e-15, "none"), (1e-17, "active"),
@@ -88,33 +100,46 @@ def test_high_density_aligned_soft_contacts(small_scene, make_sim, k_a, guiding)
     print(check_invariants(sim, 4000).summary())
 
 
+def _head_tail_gap(pos, follower=1, leader=0):
+    from taichimyxo.geometry import closest_points
+    return float(closest_points(pos[follower, 0], pos[follower, 1], pos[leader, -2], pos[leader, -1])[4]) - W
+
+
 @pytest.mark.parametrize("kind", ["active", "passive", "adhesion", "particles"])
 def test_guiding_at_gap_zero_and_at_the_cutoff(small_scene, make_sim, kind):
-    """A follower's head exactly at gap 0 and exactly at gap d_g (where the pull jumps from F_max to 0) from the
-    leader's tail, at 30 degrees so the pull has a normal part (passive steering acts)."""
+    """A follower's head exactly at gap 0, exactly at gap d_g (the pull is zero there: g >= d_g) and just inside
+    d_g (the full F_max pull, which drops to zero a hair further out) from the leader's tail, at 30 degrees so the
+    pull has a normal part (passive steering acts). Pulled from just inside the cut-off, the follower crosses the
+    guiding range toward contact (except passively, where the pull only steers)."""
     guiding = {"kind": "active" if kind == "particles" else kind}
     if kind == "particles":
         guiding["distance"] = "particles"
     sc = small_scene(2, guiding=guiding)
-    d_g = sc.raw["guiding"]["range_um"]
+    d_g, f_max = sc.raw["guiding"]["range_um"], sc.raw["guiding"]["f_max_pN"]
     leader = straight((10.0, 10.0), 0.0, N, L0)              # k_e = +1: moves along -x, tail = particle N-1
+    u = np.array([math.cos(math.radians(30)), math.sin(math.radians(30))])
     sim = None
-    for gap in (0.0, d_g):
-        u = np.array([math.cos(math.radians(30)), math.sin(math.radians(30))])
+    for gap in (0.0, d_g, d_g * (1 - 1e-6)):
         head = leader[-1] + (W + gap) * u
         follower = straight(head + 0.5 * (N - 1) * L0 * np.array([1.0, 0.0]), 0.0, N, L0)   # head = particle 0
         pos = np.stack([leader, follower])
-        # the gap is as set (to rounding): segment distance between head and tail segments
-        from taichimyxo.geometry import closest_points
-        d = closest_points(follower[0], follower[1], leader[-2], leader[-1])[4]
-        assert d - W == pytest.approx(gap, abs=1e-12)
+        assert _head_tail_gap(pos) == pytest.approx(gap, abs=1e-12)
         if sim is None:
             sim = make_sim(sc, pos, _ke(1, 1))
         else:
             sim.set_state(pos, _ke(1, 1))
-        g = sim.forces()["total"]
-        print(f"gap {gap}: pull on the follower's head {g[1, 0]}")
-        print(check_invariants(sim, 3000).summary())
+        pull = sim.forces()["total"][1, 0] - [-sc.engine_force / N, 0.0]     # minus the head's engine share
+        if gap < d_g:
+            expect = min(sc.k_g * gap, f_max)
+            if kind == "passive":
+                expect *= math.sin(math.radians(30))
+            assert np.linalg.norm(pull) == pytest.approx(expect, rel=1e-3, abs=1e-3)
+        else:
+            assert np.linalg.norm(pull) < 1e-3
+        mon = check_invariants(sim, 2000)
+        if gap == d_g * (1 - 1e-6) and kind != "passive":
+            assert _head_tail_gap(sim.positions()) < 0.3 * d_g      # pulled in: gap ~ d_g exp(-t k_g / (N zeta_t))
+        print(f"{kind} gap {gap}: pull {pull}; {mon.summary()}")
 
 
 @pytest.mark.parametrize("same_direction", [True, False], ids=["same-direction", "opposite"])
@@ -151,16 +176,60 @@ def test_parallel_and_collinear_segments_in_contact(small_scene, make_sim, layou
     print(check_invariants(sim, 3000, settle_steps=settle).summary())
 
 
-@pytest.mark.parametrize("stiffness", ["very flexible", "flexible", "very rigid"])
+@pytest.mark.parametrize("stiffness", ["very flexible", "flexible", "rigid", "very rigid"])
 def test_cell_bent_into_a_ring_following_its_own_tail(small_scene, make_sim, stiffness):
-    """One cell on a circle whose head is 0.1 µm (gap) behind its own tail, active following of itself."""
+    """One cell on a circle whose head is 0.1 µm (gap) behind its own tail, active following of itself. A very rigid
+    ring is far from equilibrium (1100 pN on the head): it unbends first (speed bound off for that)."""
     sc = small_scene(1, cell={"k_a_N_m": STIFFNESS[stiffness]}, guiding={"kind": "active", "self": True})
     r = ring_radius_for_gap(N, L0, W + 0.1)
     ring = arc((10.0, 10.0), r, 0.0, N, L0, sense=-1)      # particle 0 = head, moving counter-clockwise
     sim = make_sim(sc, ring[None], _ke(1))
+    # the head is pulled toward its own tail
     f = sim.forces()
-    print(f"ring radius {r:.3f} µm; head force {f['total'][0, 0]}")
-    print(check_invariants(sim, 4000).summary())
+    assert np.linalg.norm(f["total"][0, 0]) > 0
+    if stiffness == "very rigid":
+        _relax_then_check(sim, 1000, 3000)
+    else:
+        print(check_invariants(sim, 4000).summary())
+
+
+@pytest.mark.parametrize("case", ["rigid-ring", "curling-head"])
+def test_particles_faster_than_5_vb_are_physical(small_scene, make_sim, case):
+    """The two situations where a particle legitimately exceeds 5 v_b (see invariants.py): a rigid cell spinning as
+    a ring on its own tail, and a flexible follower's head curling round a leader's tail. The windowed speeds are
+    the same at dt / 4 (to 3 %), so they are the model's dynamics, not an integration artefact; the cells' centres
+    stay below 5 v_b."""
+    speeds = {}
+    for dt_ms in (1.0, 0.25):
+        if case == "rigid-ring":
+            sc = small_scene(1, cell={"k_a_N_m": 1e-16}, guiding={"kind": "active"}, run={"dt_ms": dt_ms})
+            pos = arc((10.0, 10.0), ring_radius_for_gap(N, L0, W + 0.1), 0.0, N, L0, sense=-1)[None]
+            ke = _ke(1)
+        else:
+            sc = small_scene(2, guiding={"kind": "active"}, run={"dt_ms": dt_ms})
+            a = straight((10.0, 10.0), 0.0, N, L0)
+            pos, ke = np.stack([a, a + [1.0, 0.75 * W]]), _ke(1, -1)
+        sim = make_sim(sc, pos, ke)
+        mon = InvariantMonitor(sim)
+        mon.run(3000 if dt_ms == 1.0 else 12000)
+        assert not mon.violations(), mon.violations()
+        speeds[dt_ms] = np.array([r["speed_max_vb"] for r in mon.records])
+        assert max(r["centre_speed_max_vb"] for r in mon.records) < 5.0
+    print(case, speeds)
+    assert speeds[1.0].max() > 5.0
+    np.testing.assert_allclose(speeds[1.0], speeds[0.25], rtol=0.03)
+
+
+def test_hairpin_self_contact_of_segments_k_and_k_plus_2(small_scene, make_sim):
+    """MODEL.md term 4: non-adjacent segments of one cell collide. Head segment folded back by 170 degrees: segments
+    0 and 2 are 0.11 µm apart (< W), so there must be a contact force."""
+    sc = small_scene(1)
+    pos = straight((10.0, 10.0), 0.0, N, L0)
+    pos[0] = pos[1] + L0 * np.array([math.cos(math.radians(10)), math.sin(math.radians(10))])
+    from taichimyxo.geometry import closest_points
+    assert closest_points(pos[0], pos[1], pos[2], pos[3])[4] < 0.25 * W
+    sim = make_sim(sc, pos[None], _ke(1))
+    assert np.abs(sim.forces()["contact"]).sum() > 0
 
 
 @pytest.mark.parametrize("during", ["contact", "guiding"])
@@ -188,7 +257,7 @@ def test_reversal_during_contact_and_during_guiding(small_scene, make_sim, durin
     else:
         assert np.linalg.norm(f0["total"][1, 0]) > 0
     ke0 = sim.engine_direction().copy()
-    mon = check_invariants(sim, 3000, window_steps=250)
+    mon = check_invariants(sim, 3000)
     assert int(sim.rev_count.to_numpy().min()) >= 2
     assert mon.records[1]["step"] > 20
     assert np.all(sim.engine_direction() == ke0 * (-1) ** sim.rev_count.to_numpy())
@@ -196,17 +265,19 @@ def test_reversal_during_contact_and_during_guiding(small_scene, make_sim, durin
 
 
 def test_cells_across_the_corner_of_the_box(small_scene, make_sim):
-    """Two crossing pairs of cells whose bodies straddle the corner (0, 0) of the periodic box, in contact through
-    the wrap in both x and y."""
+    """Cells whose bodies straddle the corner (0, 0) of the periodic box: a diagonal cell, a parallel neighbour
+    touching it through the wrap in x and y, and a perpendicular cell driving its head into its side."""
     sc = small_scene(3, box=(12.0, 12.0), guiding={"kind": "active"})
+    u = np.array([1.0, -1.0]) / math.sqrt(2)
     a = straight((0.0, 0.0), math.radians(45), N, L0)
-    b = straight((0.0, 0.0) + np.array([-0.35, 0.35]), math.radians(45), N, L0)      # 0.49 µm: touching
-    c = straight((12.0, 12.0), math.radians(-45), N, L0) + [0.0, 0.0]                  # crossing a and b
+    b = straight(0.49 * np.array([-1.0, 1.0]) / math.sqrt(2), math.radians(45), N, L0)   # 0.98 W: touching
+    c = straight((0.45 + 0.5 * (N - 1) * L0) * u, math.radians(-45), N, L0)              # head 0.9 W from a
     sim = make_sim(sc, np.stack([a, b, c]), _ke(1, -1, 1))
+    pos = sim.positions()
+    assert np.all(pos[:, 0] >= 0) and np.any(pos < 0) or np.any(pos > 12.0)             # chains cross the wrap
     f = sim.forces()["contact"]
-    assert np.abs(f).sum() > 0
-    mon = check_invariants(sim, 3000, settle_steps=300)
-    print(mon.summary())
+    assert np.abs(f[0]).sum() > 0 and np.abs(f[1]).sum() > 0 and np.abs(f[2]).sum() > 0
+    print(check_invariants(sim, 3000).summary())
 
 
 @pytest.mark.parametrize("box", [10.0, 10.1], ids=["whole-elements", "partial-element"])
@@ -252,19 +323,16 @@ def test_single_cell(small_scene, make_sim):
 
 
 # ------------------------------------------------------------------------------------------- property tests
-_SIMS: dict = {}
-
-
 @pytest.fixture(scope="module")
-def sim_cache():
-    from taichimyxo import backend
-    backend.init("cpu", 2)
-    yield _SIMS
-    for sim in _SIMS.values():
+def sim_cache(ti_session):
+    """Simulations by compile-time configuration, reused across examples (closed at the end of the module)."""
+    cache: dict = {}
+    yield cache
+    for sim in cache.values():
         sim.close()
-    _SIMS.clear()
 
 
+@pytest.mark.slow                   # ~15 s with warm kernel caches, ~55 s cold (12 compile-time configurations)
 # derandomize: the same 12 examples each run, so their kernels come from Taichi's offline cache (~1 s instead of
 # ~3 s per new compile-time configuration) and a failure reproduces exactly.
 @settings(max_examples=12, deadline=None, derandomize=True,
@@ -277,7 +345,7 @@ def test_random_small_configurations_stay_bounded(sim_cache, n, stiffness, k_c, 
     either k_c and any guiding kind: 1000 steps at the default step keep every invariant. One Simulation per
     compile-time configuration; new positions are loaded with set_state."""
     from taichimyxo.init import random_start
-    from taichimyxo.sim import Simulation
+    from taichimyxo.sim import make_simulation
     box = 10.0 if crowd else 12.0
     sc = build_small_scene(n, box=(box, box), cell={"k_a_N_m": STIFFNESS[stiffness]},
                            collisions={"k_c_N_per_m": k_c}, guiding={"kind": guiding}, run={"seed": seed})
@@ -285,7 +353,7 @@ def test_random_small_configurations_stay_bounded(sim_cache, n, stiffness, k_c, 
     key = (n, box, stiffness, k_c, guiding)
     sim = sim_cache.get(key)
     if sim is None:
-        sim = sim_cache[key] = Simulation(sc, pos, ke)
+        sim = sim_cache[key] = make_simulation(sc, positions=pos, engine_direction=ke)
     else:
         sim.set_state(pos, ke)
-    check_invariants(sim, 1000, window_steps=250)
+    check_invariants(sim, 1000)
