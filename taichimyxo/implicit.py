@@ -23,9 +23,12 @@ The engine, guiding and slime forces stay explicit (they are slow: the fastest, 
 
 Solve. Per cell, Z + dt (K_springs + K_bending + the cell's own share of each contact) is a banded SPD matrix of size
 2N (half-bandwidth 5); it is assembled and Cholesky-factorised in one thread per cell. Contacts couple cells (and
-non-adjacent segments of one cell); the global system is solved by preconditioned conjugate gradients with that
-per-cell factor as a block-Jacobi preconditioner, warm-started from the previous step's velocities, until
-r.M^-1 r <= tol^2 F.M^-1 F (Chronopoulos-Gear form: one global reduction per iteration, two parallel loops).
+non-adjacent segments of one cell). A cell with no contact is solved exactly by its own factor; the cells with
+contacts are solved together by preconditioned conjugate gradients with the per-cell factors as a block-Jacobi
+preconditioner, warm-started from the previous step's velocities, until r.M^-1 r <= tol^2 F.M^-1 F over those cells
+(Chronopoulos-Gear form: one global reduction per iteration, two parallel loops; the contact matrix is applied
+matrix-free from the contacts each segment recorded while its forces were computed, through a hook in
+Simulation._pair_forces).
 Everything is gathered (each segment stores its own contacts; each cell gathers its rows), and reductions sum
 per-block partials in a fixed order, so runs are identical on 1 and 2 threads.
 
@@ -34,11 +37,14 @@ Contact modes (constructor argument, for the accuracy study):
   diagonal  each cell solves with its own share of the contact stiffness only, as if the other body were fixed:
             no CG, but bodies pushing each other feel a spurious extra drag dt k_c (measured in the study);
   explicit  contacts stay explicit (IMEX): only springs and bending are implicit.
+
+Accuracy and cost against the explicit step: benchmarks/results/ACCURACY.md (python -m taichimyxo bench accuracy).
+In short: stable far beyond the explicit limit, but a linearised step lets overlaps lag by about v dt, so where
+cells press into each other (dense clusters, aggregate cores) the step must stay small against F / (k_c v).
 """
 
 import math
 
-import numpy as np
 import taichi as ti
 
 from .scene import SceneError
@@ -54,7 +60,7 @@ class ImplicitSimulation(Simulation):
     MAX_CONTACTS = 8          # stored contacts per segment; more are kept in the force but not in the Jacobian
 
     def __init__(self, scene, positions=None, engine_direction=None, contacts: str = "coupled",
-                 tol: float = DEFAULT_TOL, max_iter: int = DEFAULT_MAX_ITER, iters_per_launch: int = 4):
+                 tol: float = DEFAULT_TOL, max_iter: int = DEFAULT_MAX_ITER, iters_per_launch: int = 2):
         if scene.raw["run"]["mass_pg"] > 0:
             raise SceneError("run.integrator = 'imex' is overdamped only; set run.mass_pg = 0")
         if contacts not in CONTACT_MODES:
@@ -79,9 +85,18 @@ class ImplicitSimulation(Simulation):
             fb.dense(ti.i, n).place(f)
             return f
 
-        self.Lf = ti.field(self.fdt)              # per cell: lower band of the Cholesky factor, last slot 1/diag
-        fb.dense(ti.ijk, (C, self.n2, self.BW + 1)).place(self.Lf)
-        self.vel = vec(P)                         # solution (velocity), kept as the next step's first guess
+        def dof(n):
+            f = ti.field(dtype=self.fdt)
+            fb.dense(ti.i, n).place(f)
+            return f
+
+        self.Lf = ti.field(self.fdt)              # per dof: lower band of the cell's Cholesky factor, then 1/diag
+        fb.dense(ti.ij, (2 * P, self.BW + 1)).place(self.Lf)
+        self.vel = dof(2 * P)                     # solution (velocity), kept as the next step's first guess
+        self.rhs = dof(2 * P)                     # F(x_n)
+        self.tmp = dof(2 * P)
+        self.tan = vec(P)                         # tangents and chain offsets of x_n, for the assembly
+        self.xrel = vec(P)
         self.coupled = contacts == "coupled"
         if contacts != "explicit":
             self.ct_n = ti.field(ti.i32)
@@ -90,24 +105,32 @@ class ImplicitSimulation(Simulation):
             self.ct_w = ti.Vector.field(4, dtype=self.fdt)    # (P on s, Q on t, n_x, n_y), n from t to s
             fb.dense(ti.ij, (S, self.MAX_CONTACTS)).place(self.ct_t, self.ct_w)
         if self.coupled:
-            self.cg_r, self.cg_u, self.cg_w, self.cg_p, self.cg_s = (vec(P) for _ in range(5))
+            self.cg_r, self.cg_u, self.cg_w, self.cg_p, self.cg_s = (dof(2 * P) for _ in range(5))
+            self.vprev = dof(2 * P)               # last step's velocities: the first guess
+            self.active = ti.field(ti.i32)        # cell takes part in the CG (it has contacts)
+            fb.dense(ti.i, C).place(self.active)
             self.part = ti.field(ti.f64)
             fb.dense(ti.ij, (self.nblk, 3)).place(self.part)
         self.cgs = ti.field(ti.f64)               # 0 gamma, 1 delta, 2 gamma_b, 3 alpha, 4 beta
         self.cgi = ti.field(ti.i32)               # 0 state (0 iterating, 1 converged, 2 step done), 1 iterations
         fb.dense(ti.i, 8).place(self.cgs, self.cgi)   # this step, 2 total iterations, 3 steps, 4 contact overflows
         self._imex_tree = fb.finalize()
+        self._zero_guess()
+
+    def _zero_guess(self):
         self.vel.fill(0)
+        if self.coupled:
+            self.vprev.fill(0)
 
     # ------------------------------------------------------------------ state
     def set_state(self, positions, engine_direction, step: int = 0) -> None:
         super().set_state(positions, engine_direction, step)
         if self._imex_tree is not None:
-            self.vel.fill(0)
+            self._zero_guess()
 
     def load_checkpoint(self, st: dict) -> None:
         super().load_checkpoint(st)
-        self.vel.fill(0)
+        self._zero_guess()
 
     def close(self) -> None:
         super().close()
@@ -153,142 +176,130 @@ class ImplicitSimulation(Simulation):
             self.ct_n[s] = ti.min(n_contacts, self.MAX_CONTACTS)
 
     # ------------------------------------------------------------------ per-cell banded matrix
+    # Vectors are scalar fields over degrees of freedom: dof 2 p + a is axis a of particle p, so cell c owns dofs
+    # c n2 ... c n2 + n2 - 1. Loops over dofs are dynamic (not unrolled): with the band held in registers and every
+    # solve unrolled, Taichi took five minutes to compile; these loops are short and cache-resident. Only the
+    # factorisation, which appears once in the program, is unrolled.
     @ti.func
-    def _addb(self, Mb: ti.template(), pi: ti.template(), pj: ti.template(), B):
-        """Add the 2x2 block B at particle rows pi >= pj to the lower band Mb[i, i - j]."""
+    def _addb(self, base, pi, pj, B):
+        """Add the 2x2 block B at particle rows pi > pj to the lower band (Lf[base + i, i - j])."""
         for a in ti.static(range(2)):
             for b in ti.static(range(2)):
-                if ti.static(2 * pi + a >= 2 * pj + b):
-                    Mb[2 * pi + a, 2 * pi + a - 2 * pj - b] += B[a, b]
+                i = 2 * pi + a
+                j = i - 2 * pj - b
+                self.Lf[base + i, j] = self.Lf[base + i, j] + B[a, b]
 
     @ti.func
-    def _factor(self, c, X, T, dt):
-        """Assemble Z + dt K for cell c (drag, springs, bending, own share of contacts) and factorise into Lf[c]."""
+    def _addd(self, base, pi, B):
+        """Add the symmetric 2x2 block B on the diagonal of particle pi."""
+        # plain read-modify-write: `field[i] += x` compiles to an atomic add, several times slower
+        i = base + 2 * pi
+        self.Lf[i, 0] = self.Lf[i, 0] + B[0, 0]
+        self.Lf[i + 1, 0] = self.Lf[i + 1, 0] + B[1, 1]
+        self.Lf[i + 1, 1] = self.Lf[i + 1, 1] + B[1, 0]
+
+    @ti.func
+    def _factor(self, c, dt):
+        """Assemble Z + dt K for cell c (drag, springs, bending, own share of contacts) from tan / xrel and
+        Cholesky-factorise it in place in Lf (lower band, L[i, j] at Lf[base + i, i - j], 1 / L[i, i] in the last
+        slot)."""
         N = ti.static(self.cfg.N)
         n2 = ti.static(self.n2)
         BW = ti.static(self.BW)
-        Mb = ti.Matrix.zero(self.fdt, n2, BW)
+        base = c * n2
+        pb = c * N
         I2 = ti.Matrix.identity(self.fdt, 2)
-        for k in ti.static(range(N)):
-            t = ti.Vector([T[k, 0], T[k, 1]])
-            self._addb(Mb, k, k, self.cfg.zeta_n * I2 + (self.cfg.zeta_t - self.cfg.zeta_n) * t.outer_product(t))
-        U = ti.Matrix.zero(self.fdt, N - 1, 2)
-        Ln = ti.Vector.zero(self.fdt, N - 1)
-        for k in ti.static(range(N - 1)):
-            l = ti.Vector([X[k + 1, 0] - X[k, 0], X[k + 1, 1] - X[k, 1]])
+        for i in range(n2):
+            for j in ti.static(range(BW + 1)):
+                self.Lf[base + i, j] = 0.0
+        for k in range(N):
+            t = self.tan[pb + k]
+            self._addd(base, k, self.cfg.zeta_n * I2 + (self.cfg.zeta_t - self.cfg.zeta_n) * t.outer_product(t))
+        for k in range(N - 1):
+            l = self.xrel[pb + k + 1] - self.xrel[pb + k]
             ln = l.norm()
             u = l / ln
-            Ln[k] = ln
-            U[k, 0] = u[0]
-            U[k, 1] = u[1]
             g = ti.max(0.0, 1.0 - self.cfg.l0 / ln)
             Ks = dt * self.cfg.k_s * ((1.0 - g) * u.outer_product(u) + g * I2)
-            self._addb(Mb, k, k, Ks)
-            self._addb(Mb, k + 1, k + 1, Ks)
-            self._addb(Mb, k + 1, k, -Ks)
-        for j in ti.static(range(N - 2)):
-            gA = _perp(ti.Vector([U[j, 0], U[j, 1]])) / Ln[j]
-            gC = _perp(ti.Vector([U[j + 1, 0], U[j + 1, 1]])) / Ln[j + 1]
+            self._addd(base, k, Ks)
+            self._addd(base, k + 1, Ks)
+            self._addb(base, k + 1, k, -Ks)
+        ka = dt * self.cfg.k_a
+        for j in range(N - 2):
+            l1 = self.xrel[pb + j + 1] - self.xrel[pb + j]
+            l2 = self.xrel[pb + j + 2] - self.xrel[pb + j + 1]
+            gA = _perp(l1) / l1.dot(l1)           # d theta / d x_j = perp(l1) / |l1|^2
+            gC = _perp(l2) / l2.dot(l2)
             gB = -(gA + gC)
-            G = [gA, gB, gC]
-            ka = dt * self.cfg.k_a
-            for p in ti.static(range(3)):
-                for q in ti.static(range(p + 1)):
-                    self._addb(Mb, j + p, j + q, ka * G[p].outer_product(G[q]))
+            self._addd(base, j, ka * gA.outer_product(gA))
+            self._addd(base, j + 1, ka * gB.outer_product(gB))
+            self._addd(base, j + 2, ka * gC.outer_product(gC))
+            self._addb(base, j + 1, j, ka * gB.outer_product(gA))
+            self._addb(base, j + 2, j, ka * gC.outer_product(gA))
+            self._addb(base, j + 2, j + 1, ka * gC.outer_product(gB))
         if ti.static(self.contacts != "explicit"):
             kc = dt * self.cfg.k_c
-            for k in ti.static(range(N - 1)):
+            for k in range(N - 1):
                 s = c * (N - 1) + k
                 for q in range(self.ct_n[s]):
                     w4 = self.ct_w[s, q]
                     P = w4[0]
                     nv = ti.Vector([w4[2], w4[3]])
                     nn = kc * nv.outer_product(nv)
-                    self._addb(Mb, k, k, (1.0 - P) * (1.0 - P) * nn)
-                    self._addb(Mb, k + 1, k + 1, P * P * nn)
-                    self._addb(Mb, k + 1, k, (1.0 - P) * P * nn)
-        # banded Cholesky, L[i, j] stored at Lf[c, i, i - j]; slot BW holds 1 / L[i, i]
-        L = ti.Matrix.zero(self.fdt, n2, BW + 1)
+                    self._addd(base, k, (1.0 - P) * (1.0 - P) * nn)
+                    self._addd(base, k + 1, P * P * nn)
+                    self._addb(base, k + 1, k, (1.0 - P) * P * nn)
+        # band Cholesky, unrolled at compile time (one copy in the program): ~15 % faster steps than dynamic loops
         for i in ti.static(range(n2)):
             for j in ti.static(range(max(0, i - BW + 1), i + 1)):
-                acc = Mb[i, i - j]
+                acc = self.Lf[base + i, i - j]
                 for k in ti.static(range(max(0, i - BW + 1), j)):
-                    acc -= L[i, i - k] * L[j, j - k]
+                    acc -= self.Lf[base + i, i - k] * self.Lf[base + j, j - k]
                 if ti.static(i == j):
                     d = ti.sqrt(ti.max(acc, 1e-30))
-                    L[i, 0] = d
-                    L[i, BW] = 1.0 / d
+                    self.Lf[base + i, 0] = d
+                    self.Lf[base + i, BW] = 1.0 / d
                 else:
-                    L[i, i - j] = acc * L[j, BW]
-        for i in ti.static(range(n2)):
-            for j in ti.static(range(BW + 1)):
-                self.Lf[c, i, j] = L[i, j]
+                    self.Lf[base + i, i - j] = acc * self.Lf[base + j, BW]
 
     @ti.func
-    def _load_factor(self, c):
-        L = ti.Matrix.zero(self.fdt, self.n2, self.BW + 1)
-        for i in ti.static(range(self.n2)):
-            for j in ti.static(range(self.BW + 1)):
-                L[i, j] = self.Lf[c, i, j]
-        return L
-
-    @ti.func
-    def _solve(self, L, r):
-        """z = M^-1 r with M = L L^T (banded)."""
+    def _solve(self, c, src: ti.template(), dst: ti.template()):
+        """dst = M^-1 src on cell c's dofs (M = L L^T banded); src may be dst."""
         n2 = ti.static(self.n2)
         BW = ti.static(self.BW)
-        y = ti.Vector.zero(self.fdt, n2)
-        for i in ti.static(range(n2)):
-            acc = r[i]
-            for k in ti.static(range(max(0, i - BW + 1), i)):
-                acc -= L[i, i - k] * y[k]
-            y[i] = acc * L[i, BW]
-        z = ti.Vector.zero(self.fdt, n2)
-        for ii in ti.static(range(n2)):
-            i = ti.static(n2 - 1 - ii)
-            acc = y[i]
-            for k in ti.static(range(i + 1, min(n2, i + BW))):
-                acc -= L[k, k - i] * z[k]
-            z[i] = acc * L[i, BW]
-        return z
+        base = c * n2
+        for i in range(n2):
+            acc = src[base + i]
+            for k in range(ti.max(0, i - BW + 1), i):
+                acc -= self.Lf[base + i, i - k] * dst[base + k]
+            dst[base + i] = acc * self.Lf[base + i, BW]
+        for ii in range(n2):
+            i = n2 - 1 - ii
+            acc = dst[base + i]
+            for k in range(i + 1, ti.min(n2, i + BW)):
+                acc -= self.Lf[base + k, k - i] * dst[base + k]
+            dst[base + i] = acc * self.Lf[base + i, BW]
 
     @ti.func
-    def _mul(self, L, y):
-        """M y = L (L^T y)."""
-        n2 = ti.static(self.n2)
-        BW = ti.static(self.BW)
-        t = ti.Vector.zero(self.fdt, n2)
-        for i in ti.static(range(n2)):
-            for k in ti.static(range(i, min(n2, i + BW))):
-                t[i] += L[k, k - i] * y[k]
-        out = ti.Vector.zero(self.fdt, n2)
-        for i in ti.static(range(n2)):
-            for k in ti.static(range(max(0, i - BW + 1), i + 1)):
-                out[i] += L[i, i - k] * t[k]
-        return out
-
-    @ti.func
-    def _get(self, f: ti.template(), c):
-        v = ti.Vector.zero(self.fdt, self.n2)
-        for k in ti.static(range(self.cfg.N)):
-            e = f[c * self.cfg.N + k]
-            v[2 * k] = e[0]
-            v[2 * k + 1] = e[1]
-        return v
-
-    @ti.func
-    def _put(self, f: ti.template(), c, v):
-        for k in ti.static(range(self.cfg.N)):
-            f[c * self.cfg.N + k] = ti.Vector([v[2 * k], v[2 * k + 1]])
-
-    @ti.func
-    def _offdiag(self, c, y: ti.template(), dt):
-        """Rows of cell c of dt K_contact y minus the cell's own share (which is in M): for each contact of each of
-        the cell's segments, -dt k_c J_s^T n (n . J_t y_t). Gathered from the segment's stored contacts."""
+    def _apply(self, c, y: ti.template(), out: ti.template(), dt):
+        """out = A y on cell c's rows: M y (= L L^T y, the cell's own block) plus the contact coupling to other
+        segments, -dt k_c J_s^T n (n . J_t y_t) for each stored contact (s, t) of the cell's segments."""
         N = ti.static(self.cfg.N)
-        out = ti.Vector.zero(self.fdt, self.n2)
+        n2 = ti.static(self.n2)
+        BW = ti.static(self.BW)
+        base = c * n2
+        for i in range(n2):
+            acc = ti.cast(0.0, self.fdt)
+            for k in range(i, ti.min(n2, i + BW)):
+                acc += self.Lf[base + k, k - i] * y[base + k]
+            self.tmp[base + i] = acc
+        for i in range(n2):
+            acc = ti.cast(0.0, self.fdt)
+            for k in range(ti.max(0, i - BW + 1), i + 1):
+                acc += self.Lf[base + i, i - k] * self.tmp[base + k]
+            out[base + i] = acc
         kc = dt * self.cfg.k_c
-        for k in ti.static(range(N - 1)):
+        for k in range(N - 1):
             s = c * (N - 1) + k
             oa = ti.Vector([0.0, 0.0], dt=self.fdt)
             ob = ti.Vector([0.0, 0.0], dt=self.fdt)
@@ -299,25 +310,49 @@ class ImplicitSimulation(Simulation):
                 Q = w4[1]
                 nv = ti.Vector([w4[2], w4[3]])
                 pc, pd = self._seg_ends(t)
-                wt = nv.dot((1.0 - Q) * y[pc] + Q * y[pd])
+                wt = nv[0] * ((1.0 - Q) * y[2 * pc] + Q * y[2 * pd]) + \
+                    nv[1] * ((1.0 - Q) * y[2 * pc + 1] + Q * y[2 * pd + 1])
                 oa += (1.0 - P) * wt * nv
                 ob += P * wt * nv
-            out[2 * k] -= kc * oa[0]
-            out[2 * k + 1] -= kc * oa[1]
-            out[2 * k + 2] -= kc * ob[0]
-            out[2 * k + 3] -= kc * ob[1]
-        return out
+            i = base + 2 * k
+            out[i] = out[i] - kc * oa[0]
+            out[i + 1] = out[i + 1] - kc * oa[1]
+            out[i + 2] = out[i + 2] - kc * ob[0]
+            out[i + 3] = out[i + 3] - kc * ob[1]
+
+    @ti.func
+    def _dot(self, c, a: ti.template(), b: ti.template()):
+        base = c * self.n2
+        acc = ti.cast(0.0, ti.f64)
+        for i in range(self.n2):
+            acc += ti.cast(a[base + i] * b[base + i], ti.f64)
+        return acc
+
+    @ti.func
+    def _load_cell(self, c):
+        """Forces at x_n (MODEL.md terms 1-6) into rhs, tangents and chain offsets into tan / xrel."""
+        N = ti.static(self.cfg.N)
+        x0, X, F, T, Fi = self._cell_forces(c)
+        for k in ti.static(range(N)):
+            p = c * N + k
+            f = ti.Vector([F[k, 0], F[k, 1]])
+            t = ti.Vector([T[k, 0], T[k, 1]])
+            self.rhs[2 * p] = f[0]
+            self.rhs[2 * p + 1] = f[1]
+            self.tan[p] = t
+            self.xrel[p] = ti.Vector([X[k, 0], X[k, 1]])
 
     # ------------------------------------------------------------------ end of step (shared by the modes)
     @ti.func
-    def _advance_cell(self, c, V, dt, check_skin):
-        """x_n+1 = x_n + dt v for cell c (V: its 2N velocity components), wrap, skin flag, slime claim, clock."""
+    def _advance_cell(self, c, dt, check_skin):
+        """x_n+1 = x_n + dt v for cell c, wrap, skin flag, slime claim, reversal clock (as the explicit step)."""
         N = ti.static(self.cfg.N)
         half_skin2 = ti.static((0.5 * self.cfg.skin) ** 2)
         moved = 0
-        for k in ti.static(range(N)):
+        for k in range(N):
             p = c * N + k
-            xn = self.x[p] + ti.cast(ti.Vector([V[2 * k], V[2 * k + 1]]) * dt, self.pdt)
+            v = ti.Vector([self.vel[2 * p], self.vel[2 * p + 1]])
+            xn = self.x[p] + ti.cast(v * dt, self.pdt)
             xn[0] -= self.cfg.Lx * ti.floor(xn[0] / self.cfg.Lx)
             xn[1] -= self.cfg.Ly * ti.floor(xn[1] / self.cfg.Ly)
             self.x[p] = xn
@@ -334,11 +369,11 @@ class ImplicitSimulation(Simulation):
                 self._reversal_clock(c)
 
     @ti.func
-    def _slime_pass(self):
+    def _slime_pass(self, gated: ti.template()):
         if ti.static(self.cfg.slime):
             ti.loop_config(serialize=self.serial)
             for c in range(self.cfg.n_cells):
-                if self.cgi[0] == 1:
+                if not gated or self.cgi[0] == 1:
                     self._slime_write(c)
                     if ti.static(self.cfg.reversals):
                         self._reversal_clock(c)
@@ -346,8 +381,8 @@ class ImplicitSimulation(Simulation):
     # ------------------------------------------------------------------ kernels
     @ti.kernel
     def _imex_begin(self, dt: ti.f64, check_skin: ti.i32):
-        """Forces at x_n (MODEL.md terms 1-6), per-cell assembly and factorisation. Without coupled contacts the
-        per-cell solve is the whole step; with them, the CG start: r = F - A v_prev, u = M^-1 r, w = A u."""
+        """Forces, per-cell assembly and factorisation. Without coupled contacts the per-cell solve is the whole
+        step; with them, the CG start: r = F - A v_prev, u = M^-1 r, w = A u (v_prev: last step's velocities)."""
         C = ti.static(self.cfg.n_cells)
         bs = ti.static(self.bs)
         dtf = ti.cast(dt, self.fdt)
@@ -359,21 +394,11 @@ class ImplicitSimulation(Simulation):
         if ti.static(not self.coupled):
             ti.loop_config(serialize=self.serial)
             for c in range(C):
-                x0, X, F, T, Fi = self._cell_forces(c)
-                self._factor(c, X, T, dtf)
-                fv = ti.Vector.zero(self.fdt, self.n2)
-                for k in ti.static(range(self.cfg.N)):
-                    fv[2 * k] = F[k, 0]
-                    fv[2 * k + 1] = F[k, 1]
-                V = self._solve(self._load_factor(c), fv)
-                self._put(self.vel, c, V)
-                self._advance_cell(c, V, dt, check_skin)
-            if ti.static(self.cfg.slime):
-                ti.loop_config(serialize=self.serial)
-                for c in range(C):
-                    self._slime_write(c)
-                    if ti.static(self.cfg.reversals):
-                        self._reversal_clock(c)
+                self._load_cell(c)
+                self._factor(c, dtf)
+                self._solve(c, self.rhs, self.vel)
+                self._advance_cell(c, dt, check_skin)
+            self._slime_pass(False)
             ti.loop_config(serialize=True)
             for _ in range(1):
                 self.cgi[3] += 1
@@ -383,23 +408,30 @@ class ImplicitSimulation(Simulation):
                 g = ti.cast(0.0, ti.f64)
                 gb = ti.cast(0.0, ti.f64)
                 for c in range(b * bs, ti.min((b + 1) * bs, C)):
-                    x0, X, F, T, Fi = self._cell_forces(c)
-                    self._factor(c, X, T, dtf)
-                    L = self._load_factor(c)
-                    fv = ti.Vector.zero(self.fdt, self.n2)
-                    for k in ti.static(range(self.cfg.N)):
-                        fv[2 * k] = F[k, 0]
-                        fv[2 * k + 1] = F[k, 1]
-                    v0 = self._get(self.vel, c)
-                    r = fv - self._mul(L, v0) - self._offdiag(c, self.vel, dtf)
-                    u = self._solve(L, r)
-                    self._put(self.cg_r, c, r)
-                    self._put(self.cg_u, c, u)
-                    z = ti.Vector.zero(self.fdt, self.n2)
-                    self._put(self.cg_p, c, z)
-                    self._put(self.cg_s, c, z)
-                    g += ti.cast(r.dot(u), ti.f64)
-                    gb += ti.cast(fv.dot(self._solve(L, fv)), ti.f64)
+                    self._load_cell(c)
+                    self._factor(c, dtf)
+                    base = c * self.n2
+                    nc = 0
+                    for k in range(self.cfg.N - 1):
+                        nc += self.ct_n[c * (self.cfg.N - 1) + k]
+                    if nc == 0:
+                        # no contacts: the cell's block is the whole system for it; solve directly, leave the CG
+                        self.active[c] = 0
+                        self._solve(c, self.rhs, self.vel)
+                        for i in range(self.n2):
+                            self.cg_u[base + i] = 0.0
+                    else:
+                        self.active[c] = 1
+                        self._apply(c, self.vprev, self.cg_r, dtf)
+                        for i in range(self.n2):
+                            self.cg_r[base + i] = self.rhs[base + i] - self.cg_r[base + i]
+                            self.vel[base + i] = self.vprev[base + i]
+                            self.cg_p[base + i] = 0.0
+                            self.cg_s[base + i] = 0.0
+                        self._solve(c, self.cg_r, self.cg_u)
+                        g += self._dot(c, self.cg_r, self.cg_u)
+                        self._solve(c, self.rhs, self.cg_w)          # w as scratch: F . M^-1 F
+                        gb += self._dot(c, self.rhs, self.cg_w)
                 self.part[b, 0] = g
                 self.part[b, 2] = gb
             self._apply_A(dtf, False)
@@ -419,7 +451,7 @@ class ImplicitSimulation(Simulation):
                 self.cgi[1] = 0
                 self.cgi[3] += 1
                 self.cgi[0] = 0
-                if gam <= self.tol * self.tol * gb or dlt <= 0.0:
+                if gam <= self.tol * self.tol * self.cgs[2] or dlt <= 0.0:
                     self.cgi[0] = 1
                 else:
                     self.cgs[3] = gam / dlt
@@ -434,10 +466,9 @@ class ImplicitSimulation(Simulation):
             d = ti.cast(0.0, ti.f64)
             if not gated or self.cgi[0] == 0:
                 for c in range(b * bs, ti.min((b + 1) * bs, C)):
-                    u = self._get(self.cg_u, c)
-                    w = self._mul(self._load_factor(c), u) + self._offdiag(c, self.cg_u, dtf)
-                    self._put(self.cg_w, c, w)
-                    d += ti.cast(u.dot(w), ti.f64)
+                    if self.active[c]:
+                        self._apply(c, self.cg_u, self.cg_w, dtf)
+                        d += self._dot(c, self.cg_u, self.cg_w)
             self.part[b, 1] = d
 
     @ti.kernel
@@ -454,16 +485,18 @@ class ImplicitSimulation(Simulation):
                     al = ti.cast(self.cgs[3], self.fdt)
                     be = ti.cast(self.cgs[4], self.fdt)
                     for c in range(b * bs, ti.min((b + 1) * bs, C)):
-                        p = self._get(self.cg_u, c) + be * self._get(self.cg_p, c)
-                        s = self._get(self.cg_w, c) + be * self._get(self.cg_s, c)
-                        self._put(self.cg_p, c, p)
-                        self._put(self.cg_s, c, s)
-                        self._put(self.vel, c, self._get(self.vel, c) + al * p)
-                        r = self._get(self.cg_r, c) - al * s
-                        u = self._solve(self._load_factor(c), r)
-                        self._put(self.cg_r, c, r)
-                        self._put(self.cg_u, c, u)
-                        g += ti.cast(r.dot(u), ti.f64)
+                        if not self.active[c]:
+                            continue
+                        base = c * self.n2
+                        for i in range(self.n2):
+                            p = self.cg_u[base + i] + be * self.cg_p[base + i]
+                            s = self.cg_w[base + i] + be * self.cg_s[base + i]
+                            self.cg_p[base + i] = p
+                            self.cg_s[base + i] = s
+                            self.vel[base + i] = self.vel[base + i] + al * p
+                            self.cg_r[base + i] = self.cg_r[base + i] - al * s
+                        self._solve(c, self.cg_r, self.cg_u)
+                        g += self._dot(c, self.cg_r, self.cg_u)
                 self.part[b, 0] = g
             self._apply_A(dtf, True)
             ti.loop_config(serialize=True)
@@ -494,8 +527,11 @@ class ImplicitSimulation(Simulation):
         ti.loop_config(serialize=self.serial)
         for c in range(self.cfg.n_cells):
             if self.cgi[0] == 1:
-                self._advance_cell(c, self._get(self.vel, c), dt, check_skin)
-        self._slime_pass()
+                self._advance_cell(c, dt, check_skin)
+                base = c * self.n2
+                for i in range(self.n2):
+                    self.vprev[base + i] = self.vel[base + i]
+        self._slime_pass(True)
         ti.loop_config(serialize=True)
         for _ in range(1):
             if self.cgi[0] == 1:

@@ -32,7 +32,7 @@ def stable_limit_ms(scene) -> float:
     """The largest stable step for the scene's integrator and stiffnesses, ms."""
     table = _measured().get(scene.integrator, {})
     key = f"{scene.raw['cell']['k_a_N_m']:g}/{scene.raw['collisions']['k_c_N_per_m']:g}"
-    if key in table:
+    if table.get(key, 0) > 0:          # 0: the sweep found no stable step on its grid; use the estimate
         return float(table[key])
     est = estimate_explicit_limit_ms(scene)
     return est if scene.integrator == "explicit" else 4 * est

@@ -31,8 +31,9 @@ def centroid_velocity(sim, steps=20):
 @pytest.mark.parametrize("distance", ["segments", "particles"])
 def test_active_following_pulls_the_follower_up_to_3_v_b(distance):
     g = 0.249
-    sim = sim_with(in_line(g), guiding={"kind": "active", "distance": distance}, run={"precision": "f64"})
-    v = centroid_velocity(sim, 5)
+    sim = sim_with(in_line(g), guiding={"kind": "active", "distance": distance},
+                   run={"precision": "f64", "dt_ms": 1.0})
+    v = centroid_velocity(sim, 3)
     expected = (100 + 800 * g) / 100 * V_B             # engine 100 pN + pull k_g g, shared by the whole cell
     assert v[1, 0] == pytest.approx(expected, rel=0.01)
     assert v[1, 0] > 2.9 * V_B

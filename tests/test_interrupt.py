@@ -74,7 +74,7 @@ def test_stop_and_resume_in_process_equals_uninterrupted(ti_cpu, tmp_path, varia
     from taichimyxo.run import run_scene
     from taichimyxo.trajectory import count_frames, read_frames
     sections = dict(SCENES[variant])
-    sections["run"] = {"hours": 0.002, "seed": 7}                       # 7200 steps
+    sections["run"] = {"hours": 0.002, "seed": 7, "dt_ms": 1.0}         # 7200 steps
     sections["output"] = {"movie": False, "frame_interval_min": 0.02}   # a frame every 1200 steps
     sc = build_small_scene(20, **sections)
     assert sc.steps == 7200
@@ -112,7 +112,7 @@ def test_stop_and_resume_in_process_equals_uninterrupted(ti_cpu, tmp_path, varia
 def test_interrupted_movie_is_readable_and_resumes(ti_cpu, tmp_path):
     from taichimyxo.run import run_scene
     from taichimyxo.trajectory import count_frames
-    sc = build_small_scene(20, run={"hours": 0.001}, output={"movie": True, "frame_interval_min": 0.005,
+    sc = build_small_scene(20, run={"hours": 0.001, "dt_ms": 1.0}, output={"movie": True, "frame_interval_min": 0.005,
                                                              "video_width": 128, "video_height": 96})
     out = tmp_path / "out"
     part = run_scene(sc, out_dir=out, stop_after_steps=1700, progress=False)
@@ -128,7 +128,7 @@ def test_interrupted_movie_is_readable_and_resumes(ti_cpu, tmp_path):
 # ------------------------------------------------------------------------------------------------ a real signal
 def _cmd(out, *extra):
     return [sys.executable, "-m", "taichimyxo", "scene", "S1", "--out", str(out), "--seed", "5",
-            "--set", "domain.width_um=20", "--set", "domain.height_um=20", "--frame-minutes", "0.02", *extra]
+            "--set", "domain.width_um=20", "--set", "domain.height_um=20", "--set", "run.dt_ms=1", "--frame-minutes", "0.02", *extra]
 
 
 ENV = dict(os.environ, TAICHIMYXO_THREADS="2", PYTHONUNBUFFERED="1")
