@@ -347,26 +347,12 @@ class ImplicitSimulation(Simulation):
     def _advance_cell(self, c, dt, check_skin):
         """x_n+1 = x_n + dt v for cell c, wrap, skin flag, slime claim, reversal clock (as the explicit step)."""
         N = ti.static(self.cfg.N)
-        half_skin2 = ti.static((0.5 * self.cfg.skin) ** 2)
         moved = 0
         for k in range(N):
             p = c * N + k
             v = ti.Vector([self.vel[2 * p], self.vel[2 * p + 1]])
-            xn = self.x[p] + ti.cast(v * dt, self.pdt)
-            xn[0] -= self.cfg.Lx * ti.floor(xn[0] / self.cfg.Lx)
-            xn[1] -= self.cfg.Ly * ti.floor(xn[1] / self.cfg.Ly)
-            self.x[p] = xn
-            if check_skin:
-                dd = _min_image(xn - self.x_ref[p], self.cfg.Lx, self.cfg.Ly)
-                if dd.dot(dd) > half_skin2:
-                    moved = 1
-        if moved:
-            self.flags[1] = 1
-        if ti.static(self.cfg.slime):
-            self._slime_claim(c)
-        else:
-            if ti.static(self.cfg.reversals):
-                self._reversal_clock(c)
+            moved |= self._store_position(p, self.x[p] + ti.cast(v * dt, self.pdt), check_skin)
+        self._finish_cell(c, moved)
 
     @ti.func
     def _slime_pass(self, gated: ti.template()):

@@ -672,7 +672,6 @@ class Simulation:
             for c in range(self.cfg.n_cells):
                 self.interacting[c] = 0
         self._pair_forces()
-        half_skin2 = ti.static((0.5 * self.cfg.skin) ** 2)
         ti.loop_config(serialize=self.serial)
         for c in range(self.cfg.n_cells):
             x0, X, F, T, Fi = self._cell_forces(c)
@@ -692,26 +691,39 @@ class Simulation:
                 else:
                     v = ft / self.cfg.zeta_t * t + fn / self.cfg.zeta_n * n
                 xn = x0 + ti.cast(ti.Vector([X[k, 0], X[k, 1]]) + v * dt, self.pdt)
-                xn[0] -= self.cfg.Lx * ti.floor(xn[0] / self.cfg.Lx)
-                xn[1] -= self.cfg.Ly * ti.floor(xn[1] / self.cfg.Ly)
-                self.x[c * N + k] = xn
-                if check_skin:
-                    dd = _min_image(xn - self.x_ref[c * N + k], self.cfg.Lx, self.cfg.Ly)
-                    if dd.dot(dd) > half_skin2:
-                        moved = 1
-            if moved:
-                self.flags[1] = 1
-            if ti.static(self.cfg.slime):
-                self._slime_claim(c)
-            else:
-                if ti.static(self.cfg.reversals):
-                    self._reversal_clock(c)
+                moved |= self._store_position(c * N + k, xn, check_skin)
+            self._finish_cell(c, moved)
         if ti.static(self.cfg.slime):
             ti.loop_config(serialize=self.serial)
             for c in range(self.cfg.n_cells):
                 self._slime_write(c)
                 if ti.static(self.cfg.reversals):
                     self._reversal_clock(c)
+
+    @ti.func
+    def _store_position(self, p, xn, check_skin):
+        """Wrap and store particle p's new position; 1 if it has moved past half the skin since the list build."""
+        xn[0] -= self.cfg.Lx * ti.floor(xn[0] / self.cfg.Lx)
+        xn[1] -= self.cfg.Ly * ti.floor(xn[1] / self.cfg.Ly)
+        self.x[p] = xn
+        moved = 0
+        if check_skin:
+            dd = _min_image(xn - self.x_ref[p], self.cfg.Lx, self.cfg.Ly)
+            if dd.dot(dd) > (0.5 * self.cfg.skin) ** 2:
+                moved = 1
+        return moved
+
+    @ti.func
+    def _finish_cell(self, c, moved):
+        """After a cell's update: neighbour-list flag, slime claim (the reversal follows the slime write) or the
+        reversal clock. Shared by the explicit and the implicit step."""
+        if moved:
+            self.flags[1] = 1
+        if ti.static(self.cfg.slime):
+            self._slime_claim(c)
+        else:
+            if ti.static(self.cfg.reversals):
+                self._reversal_clock(c)
 
     @ti.func
     def _reversal_clock(self, c):
