@@ -46,3 +46,70 @@ def closest_points(p1, q1, p2, q2):
 def min_image(d, box):
     L = np.asarray(box, dtype=np.float64)
     return d - L * np.round(d / L)
+
+
+def contact_samples(pos):
+    """The points where the contact law samples each cell (docs/model.md "Contacts"): its particles and its segment
+    midpoints, every l0 / 2 along the cell. Returns (points (n, 2N - 1, 2), weights (2N - 1,), index along the cell
+    in half-segments (2N - 1,)). Weight 1/4, the two poles 1/2."""
+    pos = np.asarray(pos, dtype=np.float64)
+    n, N = pos.shape[:2]
+    pts = np.empty((n, 2 * N - 1, 2))
+    pts[:, 0::2] = pos
+    pts[:, 1::2] = 0.5 * (pos[:, 1:] + pos[:, :-1])
+    w = np.full(2 * N - 1, 0.25)
+    w[0] = w[-1] = 0.5
+    return pts, w, np.arange(2 * N - 1)
+
+
+def sample_polyline_contacts(pos, box, W: float):
+    """Every sample point in contact with another chain, in plain numpy, written from the definition of the contact
+    energy (docs/model.md, "Contacts") and independently of the kernels: for each sample p (contact_samples) and
+    each chain B it may touch (another cell; its own cell's segments at least 1.5 segments away along the cell), the
+    distance from p to the polyline B, i.e. to B's nearest segment, when below W. Chains are unwrapped (n, N, 2).
+    Returns (sample cell, sample index, chain, d) arrays. One contact per sample and chain: a chain folded round a
+    sample (touching it twice) counts once here, where the kernels count each locally nearest segment."""
+    pos = np.asarray(pos, dtype=np.float64)
+    L = np.asarray(box, dtype=np.float64)
+    n, N = pos.shape[:2]
+    pts, _, hidx = contact_samples(pos)
+    X = pts.reshape(-1, 2)
+    x_cell, x_h = np.divmod(np.arange(len(X)), 2 * N - 1)
+    a = pos[:, :-1].reshape(-1, 2)
+    e = (pos[:, 1:] - pos[:, :-1]).reshape(-1, 2)
+    mid = a + 0.5 * e
+    reach = 0.5 * np.linalg.norm(e, axis=-1).max(initial=0.0) + W
+    seg_cell, seg_k = np.divmod(np.arange(len(a)), N - 1)
+    C_, H_, B_, D_ = [], [], [], []
+    block = max(1, 2_000_000 // max(len(a), 1))
+    for i0 in range(0, len(X), block):
+        dm = mid[None, :, :] - X[i0:i0 + block, None, :]
+        dm -= L * np.round(dm / L)
+        ii, jj = np.nonzero((dm * dm).sum(-1) < reach * reach)
+        ii = ii + i0
+        own = x_cell[ii] == seg_cell[jj]
+        ok = ~own | (x_h[ii] - (2 * seg_k[jj] + 2) >= 3) | (2 * seg_k[jj] - x_h[ii] >= 3)
+        ii, jj = ii[ok], jj[ok]
+        e0 = min_image(a[jj] - X[ii], L)
+        ee = np.maximum((e[jj] ** 2).sum(-1), EPS)
+        u = np.clip(-(e0 * e[jj]).sum(-1) / ee, 0.0, 1.0)
+        d = np.linalg.norm(e0 + u[:, None] * e[jj], axis=-1)
+        near = d < W
+        C_.append(x_cell[ii[near]])
+        H_.append(x_h[ii[near]])
+        B_.append(seg_cell[jj[near]])
+        D_.append(d[near])
+    c, h, b, d = (np.concatenate(v) if v else np.zeros(0) for v in (C_, H_, B_, D_))
+    order = np.lexsort((d, b, h, c))              # nearest segment first within each (sample, chain)
+    c, h, b, d = c[order].astype(int), h[order].astype(int), b[order].astype(int), d[order]
+    first = np.ones(len(c), bool)
+    first[1:] = (c[1:] != c[:-1]) | (h[1:] != h[:-1]) | (b[1:] != b[:-1])
+    return c[first], h[first], b[first], d[first]
+
+
+def contact_energy(pos, box, W: float, k_c: float) -> float:
+    """The contact energy (pN·µm): sum over samples p and chains B of w_p k_c / 2 (W - D)^2, D the distance from
+    the sample to the chain (see sample_polyline_contacts)."""
+    _, h, _, d = sample_polyline_contacts(pos, box, W)
+    _, w, _ = contact_samples(np.zeros((1, (len(np.asarray(pos)[0]) if len(pos) else 2), 2)))
+    return float(0.5 * k_c * (w[h] * (W - d) ** 2).sum())

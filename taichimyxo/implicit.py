@@ -1,6 +1,6 @@
 """The stiff-capable step (scene run.integrator = "imex"): linearly implicit Euler on springs, bending and contacts.
 
-Equation (MODEL.md "Equation of motion", overdamped): Z(x) v = F(x), Z the anisotropic drag. The explicit step takes
+Equation (docs/model.md "Equation of motion", overdamped): Z(x) v = F(x), Z the anisotropic drag. The explicit step takes
 v = Z^-1 F(x_n) and is stable only while dt stays below ~2 zeta / (stiffest rate): a few ms at the paper's k_s, k_c
 and very rigid k_a. This step takes one Newton step of backward Euler instead:
 
@@ -12,8 +12,10 @@ the stiffness -dF/dx of the conservative stiff terms:
     is negative, is dropped);
   - angular springs: k_a g g^T per joint, g = d theta / dx over the joint's three particles (the theta d2theta term
     is dropped);
-  - contacts: k_c J^T n n^T J per accepted contact, J the lever-rule map from the four end particles to the
-    separation of the closest points (lever arms P, Q held fixed; the tangential geometric term is dropped).
+  - contacts: w k_c J^T n n^T J per sample contact (w the sample's weight, sim.py "contact law"), J the map from
+    the sample point and the two ends of the segment it presses to their separation (lever arms held fixed; the
+    tangential geometric term is dropped). Each segment stores its view of a contact as lever arms (P on itself,
+    Q on the other segment, the sample's own being 0, 1/2 or 1) and n scaled by sqrt(w).
 The engine, guiding and slime forces stay explicit (they are slow: the fastest, guiding, has rate k_g / (N zeta_t)
 ~ 0.5 /s). Properties, each tested in tests/test_implicit.py:
   - fixed points are those of the explicit step (v = 0 exactly where F(x_n) = 0);
@@ -57,7 +59,7 @@ DEFAULT_MAX_ITER = 40
 
 @ti.data_oriented
 class ImplicitSimulation(Simulation):
-    MAX_CONTACTS = 8          # stored contacts per segment; more are kept in the force but not in the Jacobian
+    MAX_CONTACTS = 16         # stored node contacts per segment; more are kept in the force but not in the Jacobian
 
     def __init__(self, scene, positions=None, engine_direction=None, contacts: str = "coupled",
                  tol: float = DEFAULT_TOL, max_iter: int = DEFAULT_MAX_ITER, iters_per_launch: int = 2):
@@ -150,23 +152,11 @@ class ImplicitSimulation(Simulation):
 
     # ------------------------------------------------------------------ contacts recorded by _pair_forces
     @ti.func
-    def _contact_hook(self, s, i, t, P, dist, n):
+    def _contact_hook(self, s, i, t, P, Q, gn):
         if ti.static(self.contacts != "explicit"):
             if i < self.MAX_CONTACTS:
-                a, b = self._seg_ends(s)
-                c_, d_ = self._seg_ends(t)
-                xa = self.x[a]
-                pb = ti.cast(_min_image(self.x[b] - xa, self.cfg.Lx, self.cfg.Ly), self.fdt)
-                pc = ti.cast(_min_image(self.x[c_] - xa, self.cfg.Lx, self.cfg.Ly), self.fdt)
-                pd = pc + ti.cast(_min_image(self.x[d_] - self.x[c_], self.cfg.Lx, self.cfg.Ly), self.fdt)
-                c2 = P * pb - dist * n              # closest point on t (the separation is dist * n)
-                e = pd - pc
-                ee = e.dot(e)
-                Q = ti.cast(0.0, self.fdt)
-                if ee > 1e-12:
-                    Q = ti.math.clamp((c2 - pc).dot(e) / ee, 0.0, 1.0)
                 self.ct_t[s, i] = t
-                self.ct_w[s, i] = ti.Vector([P, Q, n[0], n[1]], dt=self.fdt)
+                self.ct_w[s, i] = ti.Vector([P, Q, gn[0], gn[1]], dt=self.fdt)
             else:
                 ti.atomic_add(self.cgi[4], 1)
 
@@ -330,7 +320,7 @@ class ImplicitSimulation(Simulation):
 
     @ti.func
     def _load_cell(self, c):
-        """Forces at x_n (MODEL.md terms 1-6) into rhs, tangents and chain offsets into tan / xrel."""
+        """Forces at x_n (docs/model.md terms 1-6) into rhs, tangents and chain offsets into tan / xrel."""
         N = ti.static(self.cfg.N)
         x0, X, F, T, Fi = self._cell_forces(c)
         for k in ti.static(range(N)):
@@ -531,12 +521,14 @@ class ImplicitSimulation(Simulation):
         self._finish(dt, check_skin)
 
     def _step(self, dt, check_skin):
-        """One linearly implicit step (module docstring). Replaces the explicit kernel; run() drives it."""
+        """One linearly implicit step (module docstring). Replaces the explicit kernel; run() drives it. Returns the
+        neighbour-list flag (a particle moved past half the skin), as the explicit kernel does."""
         self._imex_begin(dt, check_skin)
-        if not self.coupled:
-            return
-        for _ in range(math.ceil(self.max_iter / self.iters_per_launch) + 1):
-            self._imex_iterate(dt, check_skin)
-            if self.cgi[0] == 2:
-                return
-        self._imex_finish(dt, check_skin)
+        if self.coupled:
+            for _ in range(math.ceil(self.max_iter / self.iters_per_launch) + 1):
+                self._imex_iterate(dt, check_skin)
+                if self.cgi[0] == 2:
+                    break
+            else:
+                self._imex_finish(dt, check_skin)
+        return self.flags[1]

@@ -4,7 +4,7 @@ A state is healthy when
   - every position is finite;
   - every segment length is within +-20 % of the rest length l0;
   - no cell's centre moves faster than 5 v_b, and no particle faster than 5 v_b, speeds measured as displacements
-    over the displayed-speed window (MODEL.md: 1 s; single-step velocities in dense cores jitter far above that
+    over the displayed-speed window (docs/model.md: 1 s; single-step velocities in dense cores jitter far above that
     without meaning anything). Exception, by the physics: a guiding or slime pull of up to F_max = 200 pN acts on
     one particle, whose normal drag is zeta_n = 94 pN s/µm, so a head swinging sideways (a flexible follower curling
     round a leader's tail: ~10 v_b for about a second) or a rigid cell spinning as a ring on its own tail (tail
@@ -12,8 +12,8 @@ A state is healthy when
     bound is therefore 5 v_b + F_max / (zeta_n v_b) (37 v_b at the paper's values); the centre bound stays 5 v_b.
     An explicit-Euler instability grows geometrically and breaks the length and distance bounds as well;
   - no two segments of different cells come closer than 0.3 W, nor two non-adjacent segments of one cell
-    (segments k and k + 2 included: their hairpin contact on the node of k + 1 is kept by the node-ownership
-    rule, see sim.py `_node_owned` and tests/test_stability.py).
+    (segments k and k + 2 included: a hairpin folded on the node of k + 1 is pushed apart by the node contacts of
+    nodes k and k + 3, see sim.py `_node_contact` and tests/test_stability.py).
     Why 0.3 W: the contact force at that depth is k_c * 0.7 W = 700 pN at the high-density k_c = 0.002 N/m and
     3500 pN at 0.01 N/m, i.e. 7 to 35 cells' full engine force pressing on one contact. Nothing in a small or
     moderately dense population pushes that hard, so a deeper overlap means the step let segments pass through
@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .geometry import closest_points
+from .geometry import closest_points, contact_energy
 
 
 @dataclass(frozen=True)
@@ -127,8 +127,7 @@ def measure(pos: np.ndarray, box, l0: float, W: float, k_s: float, k_a: float, k
     out["d_self_min"] = float(d_self.min() / W) if d_self.size else math.inf
     out["e_spring"] = float(0.5 * k_s * ((ln - l0) ** 2).sum())
     out["e_bend"] = float(0.5 * k_a * (th ** 2).sum())
-    ov = np.concatenate([W - d_other[d_other < W], W - d_self[d_self < W]])
-    out["e_contact"] = float(0.5 * k_c * (ov ** 2).sum())
+    out["e_contact"] = contact_energy(pos, box, W, k_c)
     return out
 
 

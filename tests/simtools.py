@@ -4,7 +4,7 @@ import math
 import numpy as np
 
 from taichimyxo import backend
-from taichimyxo.geometry import closest_points, min_image
+from taichimyxo import geometry
 from taichimyxo.init import straight_cell
 from taichimyxo.scene import Scene
 
@@ -40,7 +40,7 @@ def arc_cell(centre, radius, start_deg, N=8, l0=4.5 / 7, direction=1):
     return np.stack([centre[0] + radius * np.cos(th), centre[1] + radius * np.sin(th)], axis=1)
 
 
-# ---------------------------------------------------------------- numpy reference energies (MODEL.md terms 1, 2, 4)
+# ---------------------------------------------------------------- numpy reference energies (docs/model.md terms 1, 2, 4)
 def spring_energy(pos, k_s, l0):
     l = np.linalg.norm(np.diff(pos, axis=-2), axis=-1)
     return 0.5 * k_s * np.sum((l - l0) ** 2)
@@ -53,43 +53,10 @@ def bend_energy(pos, k_a):
     return 0.5 * k_a * np.sum(th ** 2)
 
 
-def _owned(k, N, P, node, other, prev_dir, same_cell, k_other):
-    owner = k
-    if P >= 1.0 and k < N - 2:
-        owner = k + 1
-    elif P <= 0.0 and k > 0 and np.dot(other - node, prev_dir) < 0.0:
-        owner = k - 1
-    return owner == k or (same_cell and abs(owner - k_other) < 2)
-
-
-def contact_pairs(pos, box, W):
-    """Accepted contacts (cell_a, seg_a, cell_b, seg_b, d, P, Q) with the node-ownership rule, each pair once."""
-    n, N = pos.shape[:2]
-    L = np.asarray(box, float)
-    out = []
-    for ca in range(n):
-        for ka in range(N - 1):
-            for cb in range(ca, n):
-                for kb in range(N - 1):
-                    if (cb, kb) <= (ca, ka) or (ca == cb and abs(ka - kb) < 2):
-                        continue
-                    a0 = pos[ca, ka]
-                    a1 = a0 + min_image(pos[ca, ka + 1] - a0, L)
-                    b0 = a0 + min_image(pos[cb, kb] - a0, L)
-                    b1 = b0 + min_image(pos[cb, kb + 1] - pos[cb, kb], L)
-                    P, Q, c1, c2, d = closest_points(a0, a1, b0, b1)
-                    if d >= W:
-                        continue
-                    pa = min_image(a0 - pos[ca, ka - 1], L) if ka > 0 else np.zeros(2)
-                    pb = min_image(pos[cb, kb] - pos[cb, kb - 1], L) if kb > 0 else np.zeros(2)
-                    same = ca == cb
-                    if _owned(ka, N, P, a0, c2, pa, same, kb) and _owned(kb, N, Q, b0, c1, pb, same, ka):
-                        out.append((ca, ka, cb, kb, float(d), float(P), float(Q)))
-    return out
-
-
 def contact_energy(pos, box, W, k_c):
-    return sum(0.5 * k_c * (W - p[4]) ** 2 for p in contact_pairs(pos, box, W))
+    """The contact energy from its definition (node to nearest point of each other chain), numpy: see
+    taichimyxo.geometry.contact_energy. Written without the kernels' local nearest-segment rule."""
+    return geometry.contact_energy(pos, box, W, k_c)
 
 
 def fd_gradient(fun, pos, h=1e-6):

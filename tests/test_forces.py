@@ -1,11 +1,11 @@
-"""Each force term is minus the gradient of its energy; the S1 Text contact fixes; periodic contacts; free speed."""
+"""Springs and bending are minus the gradient of their energies; periodic contacts; free speed. The contact law has
+its own file, test_contacts.py."""
 import math
 
 import numpy as np
 import pytest
 
-from simtools import (arc_cell, bend_energy, cell, contact_energy, contact_pairs, fd_gradient, sim_with,
-                      spring_energy)
+from simtools import arc_cell, bend_energy, cell, fd_gradient, sim_with, spring_energy
 
 F64 = {"run": {"precision": "f64"}}
 L0 = 4.5 / 7
@@ -60,56 +60,6 @@ def _tip_on_cell(offset_along=0.3, depth=0.1, angle=90.0):
     u = np.array([math.cos(math.radians(angle)), math.sin(math.radians(angle))])
     b = tip[None, :] + np.arange(8)[:, None] * L0 * u[None, :]
     return np.stack([a, b])
-
-
-@pytest.mark.parametrize("config", ["tip_interior", "tilted_crossing", "side_by_side_tilted"])
-def test_contact_forces_are_minus_energy_gradient(config):
-    if config == "tip_interior":
-        pos = _tip_on_cell(0.3, 0.1)
-    elif config == "tilted_crossing":
-        pos = _tip_on_cell(0.2, 0.15, angle=60.0)
-    else:
-        a = cell((10, 10), 0.0)
-        b = cell((10.4, 10.42), 3.0)
-        pos = np.stack([a, b])
-    sim = sim_with(pos, **F64)
-    fc = sim.forces()["contact"]
-    pairs = contact_pairs(pos, (20, 20), W)
-    assert pairs, "configuration must have contacts"
-    g = fd_gradient(lambda p: contact_energy(p, (20, 20), W, sim.cfg.k_c), pos, h=1e-7)
-    np.testing.assert_allclose(fc, -g, rtol=1e-5, atol=1e-5 * np.abs(g).max())
-    # Newton's third law: contacts exert no net force
-    assert np.abs(fc.sum((0, 1))).max() < 1e-9 * np.abs(fc).max()
-    sim.close()
-
-
-def test_contact_at_a_shared_node_is_counted_once():
-    """S1 Text defect (A): a pole pressing exactly on the node shared by two segments of another cell."""
-    depth = 0.1
-    pos = _tip_on_cell(offset_along=0.0, depth=depth)        # B's tip right above A's particle 3
-    sim = sim_with(pos, **F64)
-    fc = sim.forces()["contact"]
-    expected = sim.cfg.k_c * depth
-    assert fc[1, 0, 1] == pytest.approx(expected, rel=1e-9)        # not 2x
-    assert fc[0, :, 1].sum() == pytest.approx(-expected, rel=1e-9)
-    assert len(contact_pairs(pos, (20, 20), W)) == 1
-    sim.close()
-
-
-@pytest.mark.parametrize("shift", np.linspace(0.0, L0, 7))
-def test_sliding_along_a_straight_neighbour_feels_no_tangential_force(shift):
-    """S1 Text defect (B): a cell beside a straight cell, overlapping it, at any offset along it: the contact force
-    is normal (no washboard)."""
-    a = cell((10, 10), 0.0)
-    b = cell((10 + shift + 1.3, 10 + 0.42), 0.0)
-    sim = sim_with(np.stack([a, b]), **F64)
-    fc = sim.forces()["contact"]
-    fy = fc[1, :, 1].sum()
-    fx = fc[1, :, 0].sum()
-    assert fy > 0
-    assert abs(fx) < 1e-9 * fy
-    np.testing.assert_allclose(fc[:, :, 0], 0.0, atol=1e-9 * fy)
-    sim.close()
 
 
 @pytest.mark.parametrize("where", ["x_edge", "y_edge", "corner"])

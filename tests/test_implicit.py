@@ -30,13 +30,7 @@ def _far():
 def run_for(sim, seconds, dt_ms):
     """Advance by `seconds` with step dt_ms (the sim's compiled scene may have another default step)."""
     dt = dt_ms * 1e-3
-    every = max(1, int(0.25 * sim.cfg.skin / (10.0 * sim.scene.v_b * dt)))
-    for _ in range(int(round(seconds / dt))):
-        sim.step_count += 1
-        chk = 1 if sim.step_count % every == 0 else 0
-        sim._step(dt, chk)
-        if chk and sim.flags[1]:
-            sim.rebuild_neighbours()
+    sim.run(int(round(seconds / dt)), dt)
     return sim.positions()
 
 

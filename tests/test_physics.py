@@ -1,0 +1,199 @@
+"""Physics that had no test: the drag ratio, the mass-spring step against the overdamped one, guiding with k_e = -1
+and summed over several leaders, slime overwrite and persistence with several cells, overlap as an interaction for
+reversal suppression, and a neighbour list that never misses what all pairs would see (docs/model.md terms 1-7)."""
+import math
+
+import numpy as np
+import pytest
+
+from simtools import cell, scene, sim_with
+from taichimyxo.sim import make_simulation
+
+W = 0.5
+L0 = 4.5 / 7
+F64 = {"precision": "f64"}
+
+
+def test_normal_drag_is_half_the_tangential_drag():
+    """One step of two parallel overlapping cells: along the axis each particle moves at F_e / (N zeta_t) = v_b, across
+    it at f_n / zeta_n with zeta_n = zeta_t / 2 (docs/model.md, cell.drag_ratio_normal); zeta_n = 2 zeta_t would move
+    them four times less."""
+    a = cell((10.0, 10.0), 0.0)
+    b = cell((10.0, 10.42), 0.0)
+    sim = sim_with(np.stack([a, b]), ke=[1, 1], run={**F64, "dt_ms": 0.1})
+    f = sim.forces()
+    fc = f["contact"]
+    assert np.abs(fc[:, :, 1]).max() > 100.0
+    x0 = sim.positions()
+    sim.run(1)
+    dx = sim.positions() - x0
+    dt = sim.cfg.dt
+    zeta_t = sim.scene.zeta_t
+    assert sim.scene.zeta_n == pytest.approx(0.5 * zeta_t)
+    # straight cells along x: the tangent of every particle is -x for k_e = +1 (particle 0 leads toward -x)
+    np.testing.assert_allclose(dx[:, :, 0], -dt * (100.0 / 8) / zeta_t, rtol=1e-9)
+    np.testing.assert_allclose(dx[:, :, 1], dt * fc[:, :, 1] / (0.5 * zeta_t), rtol=1e-9, atol=1e-15)
+    sim.close()
+
+
+def _collision_and_guiding():
+    """Three cells: a pair in head-to-tail guiding range and a third crossing into the follower's side."""
+    leader = cell((12.0, 10.0), 180.0)
+    follower = cell((12.0 - 4.5 - W - 0.15, 10.1), 180.0)
+    crosser = cell((9.0, 12.6), 270.0)
+    return np.stack([leader, follower, crosser])
+
+
+@pytest.mark.slow
+def test_mass_spring_step_reproduces_the_overdamped_run():
+    """docs/model.md: any m > 0 must not change the results. A bacterium weighs about 1 pg (0.125 pg per particle): its
+    inertial time m / zeta ~ 1e-12 s is nine orders below the step, and 10 s of colliding, guided cells end where
+    the overdamped run ends. Even a particle a million times heavier (inertial time 0.7 ms, a third of the step)
+    stays within 2 % of a cell width."""
+    pos = _collision_and_guiding()
+    out = {}
+    for mass in (0.0, 0.125, 0.125e6):
+        sim = sim_with(pos, guiding={"kind": "active"}, run={**F64, "dt_ms": 2.0, "mass_pg": mass})
+        sim.run(5000)
+        out[mass] = sim.positions()
+        assert (sim.v is None) == (mass == 0.0)
+        sim.close()
+    moved = np.abs(out[0.0] - pos).max()
+    assert moved > 0.5                                          # they did collide and travel
+    assert np.abs(out[0.125] - out[0.0]).max() < 1e-6
+    assert np.abs(out[0.125e6] - out[0.0]).max() < 0.02 * W
+
+
+@pytest.mark.parametrize("ke", [1, -1])
+def test_guiding_pull_acts_on_the_head_for_either_engine_direction(ke):
+    """k_e = -1 makes particle N - 1 the head and particle 0 the tail: the pull goes to particle N - 1, toward the
+    leader's tail (particle 0 when the leader also has k_e = -1)."""
+    g = 0.15
+    leader = cell((12.0, 10.0), 180.0)                     # particle 0 at +x
+    follower = cell((12.0 - 4.5 - W - g, 10.0), 180.0)
+    if ke < 0:                                             # same places, particles numbered the other way round
+        leader, follower = leader[::-1].copy(), follower[::-1].copy()
+    sim = sim_with(np.stack([leader, follower]), ke=[ke, ke], guiding={"kind": "active"}, run=F64)
+    f = sim.forces()
+    head = 0 if ke > 0 else -1
+    guide = f["total"][1] - f["internal"][1] - f["contact"][1]
+    engine = 100.0 / 8 * f["tangent"][1]
+    pull = guide - engine
+    assert pull[head, 0] == pytest.approx(800.0 * g, rel=1e-6)           # toward the leader, +x
+    mask = np.ones(8, bool)
+    mask[head] = False
+    assert np.abs(pull[mask]).max() < 1e-9
+    sim.close()
+
+
+def test_guiding_sums_over_several_leaders():
+    """A follower's head within range of two leaders' tails feels the sum of both pulls (docs/model.md term 5)."""
+    follower = cell((6.0, 10.0), 180.0)                    # head (particle 0) at x = 8.25, moving +x
+    head = follower[0]
+    # two leaders moving +x, their tails (particle 7) just ahead of the head, above and below its axis
+    up = cell((0, 0), 180.0 - 30.0)
+    up = up - up[-1] + head + np.array([0.62, 0.25])
+    down = cell((0, 0), 180.0 + 30.0)
+    down = down - down[-1] + head + np.array([0.62, -0.25])
+    far = cell((15.0, 3.0), 0.0)
+    sim = sim_with(np.stack([follower, up, down]), ke=[1, 1, 1], box=(20.0, 20.0), guiding={"kind": "active"},
+                   run=F64)
+
+    def pull(pos):
+        sim.set_state(pos, np.ones(3))
+        f = sim.forces()
+        return (f["total"][0] - f["internal"][0] - f["contact"][0] - 100.0 / 8 * f["tangent"][0])[0]
+
+    both = pull(np.stack([follower, up, down]))
+    only_up = pull(np.stack([follower, up, far]))
+    only_down = pull(np.stack([follower, far, down]))
+    assert np.linalg.norm(only_up) > 10.0 and np.linalg.norm(only_down) > 10.0
+    np.testing.assert_allclose(both, only_up + only_down, rtol=1e-9, atol=1e-9)
+    assert abs(both[1]) < 0.2 * abs(both[0])               # the lateral pulls nearly cancel, the forward ones add
+    sim.close()
+
+
+def test_slime_is_overwritten_by_the_latest_cell_and_persists():
+    """Two cells cross the same grid row one after the other: the later rear particle overwrites the earlier trail
+    where they cross, the rest of each trail stays as written (docs/model.md term 6)."""
+    a = cell((6.0, 10.0), 180.0)          # moving +x along y = 10
+    b = cell((10.0, 4.0), 270.0)          # moving +y along x = 10, reaches y = 10 after crossing a's path
+    sim = sim_with(np.stack([a, b]), box=(20.0, 20.0), slime={"enabled": True}, run={"dt_ms": 2.0})
+    sim.run(30000)                         # 60 s: 4 µm each
+    grid = sim.slime.to_numpy()
+    ix = lambda x: int(math.floor(x / 0.25))
+    # a's trail along y = 10 behind its path, b's along x = 10
+    assert grid[ix(3.0), ix(10.0), 0] == pytest.approx(1.0, abs=1e-3)
+    assert grid[ix(10.0), ix(6.0), 1] == pytest.approx(1.0, abs=1e-3)
+    # b crossed y = 10 after a had passed x = 10: its trail overwrote a's there
+    cross = grid[ix(10.0), ix(10.0)]
+    assert cross[1] == pytest.approx(1.0, abs=1e-3) and abs(cross[0]) < 1e-3
+    written = np.count_nonzero(np.abs(grid).sum(-1))
+    sim.run(2500)                          # 5 s more: the old trail is still there
+    grid2 = sim.slime.to_numpy()
+    assert np.count_nonzero(np.abs(grid2).sum(-1)) > written
+    np.testing.assert_array_equal(grid2[ix(3.0), ix(10.0)], grid[ix(3.0), ix(10.0)])
+    sim.close()
+
+
+@pytest.mark.parametrize("gap", [-0.05, 0.0, 0.1])
+def test_overlap_counts_as_interaction_for_suppression(gap):
+    """Head overlapping the leader's tail (gap <= 0, collisions act and the guiding force is zero) is still a
+    head-to-tail interaction: the flag is set on both cells."""
+    leader = cell((12.0, 10.0), 180.0)
+    follower = cell((12.0 - 4.5 - W - gap, 10.0), 180.0)
+    loner = cell((10.0, 17.0), 0.0)
+    sim = sim_with(np.stack([leader, follower, loner]), box=(30.0, 30.0), guiding={"kind": "active"},
+                   reversals={"enabled": True, "suppression": True}, run=F64)
+    sim.forces()
+    flags = sim.interacting.to_numpy()
+    assert flags[1] != 0 and flags[0] != 0 and flags[2] == 0
+    sim.close()
+
+
+@pytest.mark.slow
+def test_neighbour_list_never_misses_what_all_pairs_see():
+    """Very flexible, actively following cells, crowded, heads swinging: at every step the forces from the Verlet
+    list equal those from a list holding every pair in the box (a second simulation whose list radius exceeds the
+    box), bit for bit in f64. The list is rebuilt from real displacements, not from an assumed top speed."""
+    sc_kw = dict(box=(15.0, 15.0), cells=14, cell={"k_a_N_m": 1e-18}, guiding={"kind": "active"},
+                 run={**F64, "dt_ms": 2.0})
+    sim = make_simulation(scene(**sc_kw))
+    ref_kw = dict(sc_kw)
+    ref_kw["run"] = {**F64, "dt_ms": 2.0, "skin_um": 25.0, "max_neighbours": 14 * 7}
+    ref = make_simulation(scene(**ref_kw), positions=sim.positions(), engine_direction=sim.engine_direction())
+    assert ref.nbr_n.to_numpy().min() >= 14 * 7 - 3          # every other segment of every cell is listed
+    worst = 0.0
+    v_b_step = sim.scene.v_b * sim.cfg.dt
+    for _ in range(1500):                                     # 3 s
+        x_before = sim.x.to_numpy()
+        sim.run(1)
+        ref.x.from_numpy(sim.x.to_numpy())
+        ref.ke.from_numpy(sim.ke.to_numpy())
+        fs, fr = sim.forces(), ref.forces()
+        np.testing.assert_array_equal(fs["contact"], fr["contact"])
+        np.testing.assert_array_equal(fs["total"], fr["total"])
+        d = sim.x.to_numpy() - x_before
+        d -= 15.0 * np.round(d / 15.0)
+        worst = max(worst, float(np.linalg.norm(d, axis=1).max()))
+    assert sim.rebuilds > 5
+    assert worst > 3 * v_b_step                               # heads did swing faster than cells move
+    sim.close()
+    ref.close()
+
+
+def test_displayed_speed_window_opens_at_the_previous_frame_when_frames_are_closer(tmp_path):
+    """Frames every 3 s with a 10 s speed window: the window opens at the previous frame (so the speed is over the
+    last 3 s), not at step 0 (the old behaviour: the net displacement since the start)."""
+    from taichimyxo.run import run_scene
+    from taichimyxo.scene import Scene
+    sc = Scene.from_dict({"scene": {"name": "win"}, "domain": {"width_um": 20.0, "height_um": 20.0},
+                          "population": {"cells": 1},
+                          "run": {"hours": 0.01, "dt_ms": 2.0, "speed_window_s": 10.0},
+                          "output": {"movie": False, "frame_interval_min": 0.05}})
+    every = sc.frame_every_steps
+    assert every == 1500
+    run_scene(sc, out_dir=str(tmp_path), progress=False, stop_after_steps=3 * every + 100)
+    ck = np.load(tmp_path / "win.ckpt.npz")
+    assert int(ck["step"]) == 3 * every + 100
+    assert int(ck["snap_step"]) == 3 * every
