@@ -114,25 +114,35 @@ def test_guiding_sums_over_several_leaders():
 
 
 def test_slime_is_overwritten_by_the_latest_cell_and_persists():
-    """Two cells cross the same grid row one after the other: the later rear particle overwrites the earlier trail
-    where they cross, the rest of each trail stays as written (docs/model.md term 6)."""
-    a = cell((6.0, 10.0), 180.0)          # moving +x along y = 10
-    b = cell((10.0, 4.0), 270.0)          # moving +y along x = 10, reaches y = 10 after crossing a's path
-    sim = sim_with(np.stack([a, b]), box=(20.0, 20.0), slime={"enabled": True}, run={"dt_ms": 2.0})
-    sim.run(30000)                         # 60 s: 4 µm each
-    grid = sim.slime.to_numpy()
+    """Two cells each run along an older trail laid the other way (antiparallel: it exerts no steering force, whose
+    normal component is zero): each rear particle overwrites the elements it passes with its own tangent, and
+    every element no rear passes keeps its old vector (MODEL.md term 6: trails persist until overwritten)."""
     ix = lambda x: int(math.floor(x / 0.25))
-    # a's trail along y = 10 behind its path, b's along x = 10
-    assert grid[ix(3.0), ix(10.0), 0] == pytest.approx(1.0, abs=1e-3)
-    assert grid[ix(10.0), ix(6.0), 1] == pytest.approx(1.0, abs=1e-3)
-    # b crossed y = 10 after a had passed x = 10: its trail overwrote a's there
-    cross = grid[ix(10.0), ix(10.0)]
-    assert cross[1] == pytest.approx(1.0, abs=1e-3) and abs(cross[0]) < 1e-3
-    written = np.count_nonzero(np.abs(grid).sum(-1))
-    sim.run(2500)                          # 5 s more: the old trail is still there
-    grid2 = sim.slime.to_numpy()
-    assert np.count_nonzero(np.abs(grid2).sum(-1)) > written
-    np.testing.assert_array_equal(grid2[ix(3.0), ix(10.0)], grid[ix(3.0), ix(10.0)])
+    ya, xb = 10.125, 15.125                       # element centres, so round-off cannot move a rear off the row
+    a = cell((4.0, ya), 180.0)                    # moving +x along the row, rear from x = 1.75 to 5.75 in 60 s
+    b = cell((xb, 12.0), 90.0)                    # moving -y along the column, rear from y = 14.25 to 10.25
+    sim = sim_with(np.stack([a, b]), box=(20.0, 20.0), slime={"enabled": True}, run={"dt_ms": 2.0})
+    grid = np.zeros((sim.sgx, sim.sgy, 2), np.float32)
+    grid[:, ix(ya)] = (-1.0, 0.0)                 # an older trail along the row, laid toward -x
+    grid[ix(xb), :] = (0.0, 1.0)                  # and one along the column, laid toward +y
+    sim.slime.from_numpy(grid)
+    sim.run(30000)                                # 60 s
+    g = sim.slime.to_numpy()
+    for x in (2.5, 3.0, 4.0, 5.0):                # passed by a's rear: overwritten with a's tangent
+        np.testing.assert_allclose(g[ix(x), ix(ya)], (1.0, 0.0), atol=2e-3)
+    for y in (11.0, 12.0, 13.0, 14.0):            # passed by b's rear
+        np.testing.assert_allclose(g[ix(xb), ix(y)], (0.0, -1.0), atol=2e-3)
+    for x in (0.5, 9.0, 12.0):                    # never under a rear: the old trail persists
+        np.testing.assert_array_equal(g[ix(x), ix(ya)], (-1.0, 0.0))
+    for y in (2.0, 6.0, 9.0, 16.0):
+        np.testing.assert_array_equal(g[ix(xb), ix(y)], (0.0, 1.0))
+    # the cells ran straight (no steering by an antiparallel trail)
+    p = sim.positions()
+    assert abs(p[0, :, 1].mean() - ya) < 0.05 and abs(p[1, :, 0].mean() - xb) < 0.05
+    sim.run(2500)                                 # 5 s more: what was written stays
+    g2 = sim.slime.to_numpy()
+    np.testing.assert_array_equal(g2[ix(3.0), ix(ya)], g[ix(3.0), ix(ya)])
+    np.testing.assert_array_equal(g2[ix(xb), ix(13.0)], g[ix(xb), ix(13.0)])
     sim.close()
 
 
