@@ -2,7 +2,10 @@
 `bench stability`; see taichimyxo/bench_accuracy.py for what is measured and benchmarks/results/ACCURACY.md for the
 reading.
 
-    python benchmarks/accuracy.py [--quick] [--stability] [--out benchmarks/results]
+    python benchmarks/accuracy.py [--quick] [--stability [--write-limits]] [--out benchmarks/results]
+
+Results go to benchmarks-results/ in the current directory unless --out names a folder (`--out benchmarks/results`
+updates the committed study); --write-limits also rewrites taichimyxo/stability_limits.json from the sweep.
 """
 import argparse
 import sys
@@ -13,7 +16,10 @@ if __name__ == "__main__":
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="reduced version (a few minutes)")
     p.add_argument("--stability", action="store_true", help="run the stability sweep instead")
-    p.add_argument("--out", default="benchmarks/results")
+    p.add_argument("--out", default=bench_accuracy.DEFAULT_OUT)
+    p.add_argument("--write-limits", action="store_true",
+                   help="with --stability: rewrite taichimyxo/stability_limits.json (the limits the program enforces)")
     a = p.parse_args()
-    fn = bench_accuracy.stability_main if a.stability else bench_accuracy.main
-    sys.exit(fn(quick=a.quick, out_dir=a.out))
+    if a.stability:
+        sys.exit(bench_accuracy.stability_main(quick=a.quick, out_dir=a.out, write_limits=a.write_limits))
+    sys.exit(bench_accuracy.main(quick=a.quick, out_dir=a.out))

@@ -6,7 +6,9 @@ soft contacts k_c = 0.002 N/m, flexible cells with active following. Here on a r
 ~13 min) at the default step. Every `--sample-s` simulated seconds the script measures, over one
 speed window (1 s), the invariants of taichimyxo.invariants (finite positions, segment lengths within +-20 % of
 l0, particle and cell-centre speeds, closest approach of segments of different cells, spring / bending / contact
-energies), prints one line, and at the end writes benchmarks/results/long_run.csv and checks the bounds.
+energies), prints one line, and at the end writes long_run.csv (into benchmarks-results/ in the current directory
+unless --out names the file: `--out benchmarks/results/long_run.csv` updates the committed result) and checks the
+bounds.
 
     python benchmarks/long_run.py                    # 30 simulated min on 15 x 15 µm, ~13 min of wall time
     python benchmarks/long_run.py --minutes 30 --box 20
@@ -24,8 +26,6 @@ import sys
 import time
 from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
-
 COLUMNS = ["t_min", "step", "len_min", "len_max", "speed_max_vb", "centre_speed_max_vb", "d_other_min_W",
            "d_self_min_W", "e_spring_pN_um", "e_bend_pN_um", "e_contact_pN_um", "wall_s"]
 
@@ -39,7 +39,7 @@ def main(argv=None) -> int:
     ap.add_argument("--dt-ms", type=float, default=0.0, help="time step, ms (default: the scene's)")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--seed", type=int, default=1)
-    ap.add_argument("--out", default=str(HERE / "results" / "long_run.csv"))
+    ap.add_argument("--out", default=str(Path("benchmarks-results") / "long_run.csv"))
     args = ap.parse_args(argv)
 
     from taichimyxo import backend

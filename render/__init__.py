@@ -1,10 +1,13 @@
 """taichimyxo.render: off-screen movies and figure panels from Frames (no display, no GPU, no Taichi).
 
-- :func:`render_frame` — one Frame → RGB image (H, W, 3) uint8: cells as capsules, each segment coloured by its speed
-  (linear 0–16 µm/min) or strain energy (log10, 1e-21–1e-17 J), colormap ``turbo`` (a perceptual ``jet``), white
-  background, colour bar with units, time (h:mm) and scale bar at the bottom.
-- :class:`VideoWriter` — Frames → MP4 (H.264, yuv420p), checked after close.
-- :func:`write_png` — one Frame → PNG figure panel.
+- :func:`render_frame` — one Frame → RGB image (H, W, 3) uint8: cells as outlined capsules, coloured by segment
+  speed (linear 0–16 µm/min) or strain energy (log10, 1e-21–1e-17 J) on ``turbo`` (a perceptual ``jet``), or per
+  cell by identity, polarity (engine direction) or axis orientation (cyclic map); white background, legend with
+  units, time (``t = 1 h 05 min``), scale bar and title at the bottom. The frame takes the domain's aspect ratio
+  within the requested size (``fit=False``: exactly the size).
+- :class:`VideoWriter` — Frames → fragmented MP4 (H.264, yuv420p), readable while it is written, checked after
+  close.
+- :func:`write_png` — one Frame → PNG figure panel (the one panel style of ``scene`` and ``render``).
 - :func:`render_trajectory` — a GSD trajectory (taichimyxo.trajectory) → MP4, without simulating.
 """
 from __future__ import annotations
@@ -12,22 +15,25 @@ from __future__ import annotations
 import math
 import os
 
-from .colors import ColorScale, speed_scale, strain_scale
-from .raster import Layout, Renderer, Viewport, compute_layout, get_renderer, render_frame
+from .colors import COLORINGS, CategoricalScale, ColorScale, make_scale, speed_scale, strain_scale
+from .raster import Layout, Renderer, Viewport, compute_layout, format_time, frame_size, get_renderer, render_frame
 from .video import PNG_SIZE, VideoWriteError, VideoWriter, verify_video, write_png
 
 __all__ = ["render_frame", "VideoWriter", "write_png", "render_trajectory", "Renderer", "Viewport", "Layout",
-           "ColorScale", "speed_scale", "strain_scale", "compute_layout", "get_renderer", "verify_video",
-           "VideoWriteError"]
+           "ColorScale", "CategoricalScale", "COLORINGS", "make_scale", "speed_scale", "strain_scale",
+           "compute_layout", "format_time", "frame_size", "get_renderer", "verify_video", "VideoWriteError",
+           "PNG_SIZE"]
 
 
 def render_trajectory(gsd_path, out_path, color="speed", size=(1920, 1080), fps=30, every=1, png_path=None,
                       progress=True, png_size=PNG_SIZE, **options) -> int:
     """Render the GSD trajectory ``gsd_path`` to the MP4 ``out_path`` (no simulation). Returns the frame count.
 
-    every: use every n-th stored frame. png_path: also write the last rendered frame as a PNG figure panel of
-    ``png_size`` (same colours). options: VideoWriter / Renderer options (crf, preset, background, vmax,
-    strain_range, title, …).
+    color: speed, strain, identity, polarity or orientation. size: the largest frame (the movie takes the domain's
+    aspect ratio within it). every: use every n-th stored frame. png_path: also write the last rendered frame as
+    a PNG figure panel (:func:`write_png`, ``png_size``, same colours and labels). options: VideoWriter / Renderer
+    options (crf, preset, keyframe_interval, vmin, vmax, background, fit, title, …); the title defaults to the
+    scene name stored in the trajectory.
     Raises ValueError if ``color="strain"`` and the trajectory has no strain energy logged."""
     from taichimyxo.trajectory import count_frames, read_frames
 
@@ -46,7 +52,9 @@ def render_trajectory(gsd_path, out_path, color="speed", size=(1920, 1080), fps=
             bar = None
     n = 0
     last = None
-    png_options = {k: v for k, v in options.items() if k not in ("crf", "preset", "check", "ffmpeg_log_level")}
+    png_options = {k: v for k, v in options.items()
+                   if k not in ("crf", "preset", "check", "ffmpeg_log_level", "keyframe_interval", "fit")}
+    make_scale(color, vmin=options.get("vmin"), vmax=options.get("vmax"))   # bad colour options: fail before work
     try:
         with VideoWriter(out_path, size=size, fps=fps, color=color, **options) as vw:
             for fr in frames:

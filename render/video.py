@@ -3,13 +3,23 @@
     with VideoWriter("videos/S3.mp4", fps=30) as vw:
         for frame in frames:
             vw.append(frame)
-    write_png(last_frame, "videos/S3_final.png")
+    write_png(last_frame, "videos/S3.png", title="S3")
 
 The video is encoded by the ffmpeg binary shipped with imageio-ffmpeg (libx264, ``-crf 18 -preset veryfast``,
-``yuv420p`` so every player can show it, ``+faststart``), fed from a background thread. Width and height must be
-even for yuv420p: an odd size is rounded UP to the next even number (the frame is rendered at that size, never
-rescaled). After ``close()`` the file is checked: it must
-exist, be non-empty, and ffmpeg must count exactly the frames that were appended; otherwise ``VideoWriteError``.
+``yuv420p`` so every player can show it), fed from a background thread. The MP4 is **fragmented**
+(``-movflags frag_keyframe+empty_moov+default_base_moof``, a keyframe every ``keyframe_interval`` frames, one
+second of movie by default): the header is written first and every keyframe closes a fragment, so the file is a
+playable movie of everything up to the last closed fragment while the run is still going, and an interrupted or
+killed run leaves a readable movie too (the frames after the last keyframe are lost only in the killed case).
+Frame size: ``size`` is the largest frame; by default the frame takes the domain's aspect ratio (see
+:mod:`taichimyxo.render.raster`); ``fit=False`` keeps exactly ``size``. Width and height must be even for yuv420p:
+an odd size is rounded UP to the next even number (the frame is rendered at that size, never rescaled). After
+``close()`` the file is checked: it must exist, be non-empty, and ffmpeg must count exactly the frames that were
+appended; otherwise ``VideoWriteError``.
+
+Figure panels: :func:`write_png` is the one function both ``scene`` (the last frame, NAME.png) and ``render``
+(``--out``'s .png) use: the same panel size (``PNG_SIZE``, fitted to the box), colours and labels (title = the
+scene name).
 """
 from __future__ import annotations
 
@@ -21,11 +31,12 @@ import weakref
 
 import numpy as np
 
-from .raster import Renderer, get_renderer
+from .raster import Renderer, get_renderer, scene_name
 
 DEFAULT_SIZE = (1920, 1080)
 DEFAULT_FPS = 30
-PNG_SIZE = (1200, 1320)      # a figure panel: the square box with the colour bar underneath
+PNG_SIZE = (1600, 1200)      # a figure panel, fitted to the box: a square box gives 1032 x 1200 px
+FRAGMENT_MOVFLAGS = "frag_keyframe+empty_moov+default_base_moof"
 
 
 class VideoWriteError(RuntimeError):
@@ -120,15 +131,22 @@ class VideoWriter:
     Parameters
     ----------
     path: output file (``.mp4``); its folder is created if missing.
-    size: (width, height) px, rounded up to even numbers.
+    size: (width, height) px wanted, rounded up to even numbers. By default (``fit=True`` in render_options) the
+        largest frame: the movie takes the domain's aspect ratio within it, and ``size`` becomes the actual frame
+        size at the first ``append``.
     fps: frames per second of the movie (not of the simulation).
-    color: ``"speed"`` (linear 0–16 µm/min) or ``"strain"`` (log10 J); see :mod:`taichimyxo.render.colors`.
+    color: ``"speed"`` (linear 0–16 µm/min), ``"strain"`` (log10 J), ``"identity"``, ``"polarity"`` or
+        ``"orientation"``; see :mod:`taichimyxo.render.colors`.
     crf, preset: libx264 quality (lower crf = better; 18 is visually lossless) and speed preset ("veryfast" by
         default: at 1080p about 3x cheaper than "medium" for the same size on our frames, leaving the CPU to the
         simulation).
+    keyframe_interval: frames between keyframes, i.e. the length of one fragment of the fragmented MP4 (default:
+        one second of movie, ``round(fps)``). The file is readable up to the last finished fragment while it is
+        being written.
     check: after closing, verify the file (exists, non-empty, frame count) and raise ``VideoWriteError`` if not.
-    render_options: passed to :class:`taichimyxo.render.raster.Renderer` (background, decorations, vmax,
-        strain_range, title, …).
+    render_options: passed to :class:`taichimyxo.render.raster.Renderer` (fit, vmin, vmax, background,
+        decorations, title, free_speed, …). The title defaults to the first frame's scene name (``title=None``:
+        none).
 
     ffmpeg starts lazily at the first ``append`` (the box is taken from the first frame) and is fed from a
     background thread. ``close()`` is idempotent and safe on an interrupt path (``except KeyboardInterrupt:
@@ -138,12 +156,15 @@ class VideoWriter:
     """
 
     def __init__(self, path, size=DEFAULT_SIZE, fps=DEFAULT_FPS, color="speed", *, crf: int = 18,
-                 preset: str = "veryfast", check: bool = True, ffmpeg_log_level: str = "error", **render_options):
+                 preset: str = "veryfast", keyframe_interval: int | None = None, check: bool = True,
+                 ffmpeg_log_level: str = "error", **render_options):
         self.path = os.fspath(path)
-        self.size = even_size(size)
+        self.request = even_size(size)
+        self.size = self.request
         if not fps or fps <= 0:
             raise ValueError(f"fps={fps!r} must be > 0")
         self.fps = fps
+        self.keyframe_interval = max(1, int(round(fps)) if keyframe_interval is None else int(keyframe_interval))
         self.color = color
         self.crf = int(crf)
         self.preset = preset
@@ -169,21 +190,29 @@ class VideoWriter:
         """Render ``frame`` and add it to the movie. Returns the rendered image (H, W, 3) uint8."""
         self._check_open()
         if self.renderer is None:
-            self.renderer = get_renderer(frame.box, self.size, self.color, **self.render_options)
+            if self._enc is not None:
+                raise ValueError("append(frame) after append_image(): use one or the other in a movie")
+            opts = dict(self.render_options)
+            if "title" not in opts:
+                opts["title"] = scene_name(frame)
+            self.renderer = get_renderer(frame.box, self.request, self.color, **opts)
+            self.size = even_size(self.renderer.size)
         img = self.renderer.render(frame)
         self.append_image(img)
         return img
 
     def append_image(self, img: np.ndarray) -> None:
-        """Add an already rendered RGB image of exactly ``size`` to the movie (the writer keeps a reference: don't
-        modify the array afterwards)."""
+        """Add an already rendered RGB image of exactly ``size`` (the frame size; before the first frame, the
+        requested size) to the movie (the writer keeps a reference: don't modify the array afterwards)."""
         self._check_open()
         w, h = self.size
         if img.shape != (h, w, 3) or img.dtype != np.uint8:
             raise ValueError(f"image of shape {img.shape} {img.dtype}; expected ({h}, {w}, 3) uint8")
         if self._enc is None:
             os.makedirs(os.path.dirname(os.path.abspath(self.path)), exist_ok=True)
-            params = ["-crf", str(self.crf), "-preset", self.preset, "-movflags", "+faststart"]
+            # fragmented MP4, a fragment per keyframe, each written out at once: readable while being written
+            params = ["-crf", str(self.crf), "-preset", self.preset, "-g", str(self.keyframe_interval),
+                      "-movflags", FRAGMENT_MOVFLAGS, "-flush_packets", "1"]
             self._enc = _Encoder(self.path, self.size, self.fps, params, self.ffmpeg_log_level)
             self._enc.start()
             _OPEN_WRITERS.add(self)
@@ -253,13 +282,19 @@ def verify_video(path, expected_frames: int | None = None) -> int:
 
 
 def write_png(frame, path, size=PNG_SIZE, color="speed", **render_options) -> np.ndarray:
-    """Write ``frame`` as a PNG figure panel (like the paper's Fig 2B–F: box, colour bar with units at the bottom,
-    time, scale bar). Returns the image."""
+    """Write ``frame`` as a PNG figure panel (like the paper's Fig 2B–F: box, legend with units at the bottom,
+    time, scale bar, title). Returns the image.
+
+    The one panel style of the project: ``scene`` (NAME.png, the last frame) and ``render`` (next to the movie)
+    both call this with the default ``size`` (PNG_SIZE, fitted to the box's aspect ratio) and the title taken from
+    the frame's scene name (pass ``title=`` to override, ``title=None`` for none)."""
     import imageio.v3 as iio
 
     path = os.fspath(path)
     d = os.path.dirname(os.path.abspath(path))
     os.makedirs(d, exist_ok=True)
+    if "title" not in render_options:
+        render_options["title"] = scene_name(frame)
     img = get_renderer(frame.box, size, color, **render_options).render(frame)
     iio.imwrite(path, img, extension=".png")
     return img

@@ -1,7 +1,9 @@
 """Benchmarks: `python -m taichimyxo bench throughput|accuracy|stability`.
 
 throughput: particle-steps per second per scene and size, measured in one run, plus the cost of each effect as a
-ratio to the non-guided scene (S1) on the same start. Writes benchmarks/results/throughput.csv and prints a table.
+ratio to the non-guided scene (S1) on the same start. Writes throughput.csv into the output folder (default
+benchmarks-results/ in the current directory: a benchmark never writes into the source tree or the installed package
+unless told to, with --out or, for the stability limits, --write-limits) and prints a table.
 Rates, never timed asserts: these machines are shared and noisy; ratios within one run are what to compare."""
 from __future__ import annotations
 
@@ -10,6 +12,8 @@ import os
 import platform
 import time
 from pathlib import Path
+
+DEFAULT_OUT = "benchmarks-results"     # relative to the current directory
 
 # (scene, what it adds over S1)
 SCENES = [
@@ -54,7 +58,7 @@ def _measure(name: str, scale: float, steps: int, warm: int, precision: str | No
     return row
 
 
-def throughput(quick: bool = False, out_dir: str = "benchmarks/results") -> list[dict]:
+def throughput(quick: bool = False, out_dir: str = DEFAULT_OUT) -> list[dict]:
     from . import backend
     backend.init("cpu")
     rows = []
@@ -96,7 +100,7 @@ def throughput(quick: bool = False, out_dir: str = "benchmarks/results") -> list
     return rows
 
 
-def main(which: str, quick: bool = False, out_dir: str = "benchmarks/results") -> int:
+def main(which: str, quick: bool = False, out_dir: str = DEFAULT_OUT, write_limits: bool = False) -> int:
     if which == "throughput":
         throughput(quick, out_dir)
         return 0
@@ -104,5 +108,5 @@ def main(which: str, quick: bool = False, out_dir: str = "benchmarks/results") -
     if which == "accuracy":
         return bench_accuracy.main(quick=quick, out_dir=out_dir)
     if which == "stability":
-        return bench_accuracy.stability_main(quick=quick, out_dir=out_dir)
+        return bench_accuracy.stability_main(quick=quick, out_dir=out_dir, write_limits=write_limits)
     raise ValueError(which)

@@ -9,7 +9,7 @@ reference (the paper's explicit step in f64 at 0.25 ms):
             the 3 v_b limit: peak and mean follower speed over the approach, relative to the reference;
   strain    a dense cluster (high-density aligned patch, cells tilted a little, jamming) at k_c = 0.002 N/m, and
   strain01  the same at k_c = 0.01 N/m (the contact stiffness inside low-density aggregates): the strain energy
-            (MODEL.md) averaged over the second half of the run, relative to the reference;
+            (docs/model.md) averaged over the second half of the run, relative to the reference;
   aggregate a prearranged rotating aggregate (spiral start, active following): the mean speed of the outer quarter
             of the cells late in the run, relative to the reference;
   horizon   the chaotic many-cell system (50 cells, low density, active following): the simulated time for which
@@ -22,9 +22,10 @@ Tolerance (SPEED_TOL, STRAIN_TOL) and the defaults it sets: benchmarks/results/A
 
 Each method runs in a fresh subprocess (Taichi fixes thread count and compiled constants per process, and every
 Simulation compiles its kernels). Accuracy runs use one thread each, two at a time; cost runs are serial and use all
-cores. Results: benchmarks/results/accuracy.csv, accuracy.png (error against wall time per simulated hour, one curve
-per method), accuracy.md (tables). The stability sweep (`stability_main`) writes stability.csv, stability.md and
-taichimyxo/stability_limits.json, which stability.py reads for step limits and defaults.
+cores. Results, in the output folder (default benchmarks-results/ in the current directory; the study's own results
+are kept in benchmarks/results/): accuracy.csv, accuracy.png (error against wall time per simulated hour, one curve
+per method), accuracy.md (tables). The stability sweep (`stability_main`) writes stability.csv, stability.md and,
+only with --write-limits, taichimyxo/stability_limits.json, which stability.py reads for step limits and defaults.
 """
 import argparse
 import json
@@ -39,6 +40,9 @@ from pathlib import Path
 
 import numpy as np
 
+# results go to benchmarks-results/ in the current directory unless --out names a folder; the stability limits the
+# program enforces (stability_limits.json, in the package) are rewritten only with --write-limits
+DEFAULT_OUT = "benchmarks-results"
 REF_DT_MS = 0.25
 # the tolerance that sets the defaults (ACCURACY.md): speeds (free cell, follower, aggregate edge) within 2 % of
 # the reference, and the strain energy of dense clusters within 10 % (strain shows how deep cells press into each
@@ -404,7 +408,7 @@ def _pool(jobs, workers: int):
         return list(ex.map(lambda j: _spawn(*j), jobs))
 
 
-def main(quick: bool = False, out_dir: str = "benchmarks/results") -> int:
+def main(quick: bool = False, out_dir: str = DEFAULT_OUT) -> int:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     CACHE.mkdir(parents=True, exist_ok=True)
@@ -633,19 +637,12 @@ def stability_worker(integrator: str, contacts: str, k_a: float, k_c: float, dts
 
 
 def _run_dt(sim, n: int, dt_ms: float) -> None:
-    """sim.run with an arbitrary step (the neighbour-check interval recomputed for it)."""
+    """sim.run with an arbitrary step; a neighbour overflow (cells blown apart) is an instability."""
     from .sim import NeighbourOverflow
-    dt = dt_ms * 1e-3
-    every = max(1, int(0.25 * sim.cfg.skin / (10.0 * sim.scene.v_b * dt)))
-    for _ in range(n):
-        sim.step_count += 1
-        chk = 1 if sim.step_count % every == 0 else 0
-        sim._step(dt, chk)
-        if chk and sim.flags[1]:
-            try:
-                sim.rebuild_neighbours()
-            except NeighbourOverflow as e:
-                raise Unstable(str(e)) from None
+    try:
+        sim.run(n, dt_ms * 1e-3)
+    except NeighbourOverflow as e:
+        raise Unstable(str(e)) from None
     if not np.all(np.isfinite(sim.x.to_numpy())):
         raise Unstable("non-finite positions")
 
@@ -672,7 +669,7 @@ def _limit(res: dict) -> float:
     return lim
 
 
-def stability_main(quick: bool = False, out_dir: str = "benchmarks/results", write_limits: bool = True) -> int:
+def stability_main(quick: bool = False, out_dir: str = DEFAULT_OUT, write_limits: bool = False) -> int:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -776,10 +773,11 @@ def _cli(argv=None) -> int:
     s.add_argument("--steps", type=int, default=400)
     a = sub.add_parser("accuracy")
     a.add_argument("--quick", action="store_true")
-    a.add_argument("--out", default="benchmarks/results")
+    a.add_argument("--out", default=DEFAULT_OUT)
     st = sub.add_parser("stability")
     st.add_argument("--quick", action="store_true")
-    st.add_argument("--out", default="benchmarks/results")
+    st.add_argument("--out", default=DEFAULT_OUT)
+    st.add_argument("--write-limits", action="store_true", help="also write taichimyxo/stability_limits.json")
     args = p.parse_args(argv)
     if args.cmd == "worker":
         r = worker(Method(**json.loads(args.method)), args.measures.split(","), args.quick, args.threads, args.ref)
@@ -792,7 +790,7 @@ def _cli(argv=None) -> int:
         return 0
     if args.cmd == "accuracy":
         return main(args.quick, args.out)
-    return stability_main(args.quick, args.out)
+    return stability_main(args.quick, args.out, write_limits=args.write_limits)
 
 
 if __name__ == "__main__":

@@ -1,15 +1,18 @@
 """Command line: python -m taichimyxo {list, keys, scene, render, analyze, videos, bench}.
 
-Bad input is one line on stderr naming the problem and a non-zero exit (2), before any simulation starts."""
+Bad input is one line on stderr naming the problem and a non-zero exit (2), before any simulation starts.
+Exit status: 0 done, 2 bad input, 3 a run stopped because its state broke a numerical invariant, 130 interrupted."""
 from __future__ import annotations
 
 import argparse
 import os
 import sys
 
-from .scene import SCHEMA, Scene, SceneError, available_scenes, parse_set, resolve_path
+from .scene import SCHEMA, Scene, SceneError, available_scenes, parse_set, resolve_path, to_toml, toml_value
+from .trajectory import TrajectoryError
 
 EXIT_BAD_INPUT = 2
+EXIT_INVARIANT = 3
 EXIT_INTERRUPTED = 130
 
 
@@ -25,6 +28,8 @@ class _Parser(argparse.ArgumentParser):
 
 
 ARCHES = ("cpu", "cuda", "vulkan", "metal", "gpu")       # as backend.init accepts them
+# benchmarks write here, relative to the current directory, never into the source tree or the installed package
+BENCH_OUT = "benchmarks-results"
 
 
 def _positive_int(text: str) -> int:
@@ -37,8 +42,19 @@ def _positive_int(text: str) -> int:
     return v
 
 
+def version() -> str:
+    """The installed distribution's version (a wheel, or an editable clone), else the package's own."""
+    try:
+        from importlib.metadata import PackageNotFoundError, version as dist_version
+        return dist_version("taichimyxo")
+    except PackageNotFoundError:
+        from . import __version__
+        return __version__
+
+
 def _build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="python -m taichimyxo", description="Myxobacteria guiding simulator (Taichi).")
+    p.add_argument("--version", action="version", version=f"taichimyxo {version()}")
     sub = p.add_subparsers(dest="cmd", required=True, parser_class=_Parser)
 
     sub.add_parser("list", help="list the scenes, one line each")
@@ -47,7 +63,11 @@ def _build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("scene", help="run a scene (name like S3, or a path to a TOML file)")
     s.add_argument("scene")
     s.add_argument("--hours", type=float, help="simulated hours (overrides run.hours)")
-    s.add_argument("--preview", action="store_true", help="small, short version (about a minute on 2 cores)")
+    s.add_argument("--preview", action="store_true",
+                   help="small, short version (about a minute on 2 cores): the box side scaled by preview.scale "
+                        "(cells with the area), at most preview.hours, frames every preview.frame_interval_min; "
+                        "values given with --set or an option (--hours, --frame-minutes, --size) are used as given, "
+                        "never scaled")
     s.add_argument("--out", default="videos", help="output folder (default videos/)")
     s.add_argument("--seed", type=int, help="random seed (overrides run.seed)")
     s.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
@@ -56,16 +76,24 @@ def _build_parser() -> argparse.ArgumentParser:
                    help="cpu (default), cuda, vulkan, metal, gpu; unavailable GPUs fall back to cpu")
     s.add_argument("--threads", type=_positive_int, help="CPU threads (default: all cores)")
     s.add_argument("--resume", action="store_true", help="continue an interrupted run from its checkpoint")
-    s.add_argument("--force", action="store_true", help="run even if the time step exceeds the stability limit")
+    s.add_argument("--force", action="store_true",
+                   help="run even if the time step exceeds the stability limit; the invariants are still checked at "
+                        "every frame (a run that breaks them stops with exit status 3)")
+    s.add_argument("--show", action="store_true",
+                   help="print the resolved scene as TOML (every key, after --set and --preview) and exit")
     s.add_argument("--no-movie", action="store_true", help="trajectory and summary only")
     s.add_argument("--fps", type=float, help="movie frames per second")
     s.add_argument("--size", help="movie size WxH, e.g. 1280x720")
     s.add_argument("--frame-minutes", type=float, help="simulated minutes between frames")
-    s.add_argument("--quiet", action="store_true", help="no progress bar")
+    s.add_argument("--quiet", action="store_true", help="no progress line")
 
     r = sub.add_parser("render", help="render a trajectory (.gsd) to a movie without simulating")
     r.add_argument("trajectory")
-    r.add_argument("--color", choices=["speed", "strain"], default="speed")
+    r.add_argument("--color", choices=["speed", "strain", "identity", "polarity", "orientation"], default="speed",
+                   help="segment speed (µm/min) or strain energy (J, log scale); cell identity, polarity (engine "
+                        "direction) or axis angle (mod 180°, cyclic)")
+    r.add_argument("--vmin", type=float, help="colour range low end (speed µm/min, default 0; strain J, 1e-21)")
+    r.add_argument("--vmax", type=float, help="colour range high end (speed µm/min, default 16; strain J, 1e-17)")
     r.add_argument("--out", help="output .mp4 (default: next to the trajectory)")
     r.add_argument("--fps", type=float, default=10.0)
     r.add_argument("--size", default="1920x1080")
@@ -78,14 +106,19 @@ def _build_parser() -> argparse.ArgumentParser:
 
     v = sub.add_parser("videos", help="regenerate the supplementary videos S1-S17")
     v.add_argument("--preview", action="store_true")
-    v.add_argument("--only", help="comma-separated scene names, e.g. S3,S8")
+    v.add_argument("--only", help="comma-separated scene names as `list` shows them, e.g. S3,S8,S2FigA")
     v.add_argument("--out", default="videos")
     v.add_argument("--arch", default="cpu", choices=ARCHES)
 
     b = sub.add_parser("bench", help="benchmarks: throughput, accuracy, stability")
     b.add_argument("which", choices=["throughput", "accuracy", "stability"])
     b.add_argument("--quick", action="store_true", help="a reduced version (minutes)")
-    b.add_argument("--out", default="benchmarks/results")
+    b.add_argument("--out", default=BENCH_OUT,
+                   help=f"folder for the results (default {BENCH_OUT}/ in the current directory)")
+    b.add_argument("--write-limits", action="store_true",
+                   help="stability: also write the measured limits into the package's stability_limits.json, which "
+                        "sets every scene's step limit and default (off by default: a benchmark never changes the "
+                        "installed program unless asked)")
     return p
 
 
@@ -136,31 +169,54 @@ def cmd_list() -> int:
 
 
 def cmd_keys() -> int:
-    for sec, keys in SCHEMA.items():
-        print(f"[{sec}]")
-        for k, (typ, default, check, doc) in keys.items():
-            print(f"  {sec}.{k} = {default!r:<12} {doc}")
+    """Three aligned columns: the dotted key, its default, its meaning (units are in the key names)."""
+    rows = [(f"{sec}.{k}", toml_value(default), doc) for sec, keys in SCHEMA.items()
+            for k, (typ, default, check, doc) in keys.items()]
+    wk = max(len(r[0]) for r in rows)
+    wd = max(len(r[1]) for r in rows)
+    print(f"{'key':<{wk}}  {'default':<{wd}}  meaning")
+    for sec in SCHEMA:
+        for key, default, doc in rows:
+            if key.split(".")[0] == sec:
+                print(f"{key:<{wk}}  {default:<{wd}}  {doc}")
     return 0
 
 
 def cmd_scene(args) -> int:
-    from .run import run_scene
     sc = load_scene_from_args(args)
+    if args.show:
+        print(to_toml(sc), end="")
+        return 0
+    from .run import duration, run_scene
     summary = run_scene(sc, out_dir=args.out, arch=args.arch, resume=args.resume, progress=not args.quiet,
                         threads=args.threads)
     if summary.get("status") == "interrupted":
-        print(f"taichimyxo: {sc.name} interrupted at {summary['simulated_seconds'] / 3600:.3f} h; files closed, "
+        print(f"taichimyxo: {sc.name} interrupted at {duration(summary['simulated_seconds'])} simulated; files closed, "
               f"checkpoint {summary['files'].get('checkpoint')}; continue with --resume", file=sys.stderr)
         return EXIT_INTERRUPTED
+    if summary.get("status") == "failed":
+        print(f"taichimyxo: error: {sc.name} stopped at step {summary['steps']} "
+              f"(t = {duration(summary['simulated_seconds'])}): {summary['invariant_broken']}; the trajectory "
+              f"{summary['files']['gsd']} is closed with the frames before it and the checkpoint "
+              f"{summary['files']['checkpoint']} is written; use a smaller run.dt_ms", file=sys.stderr)
+        return EXIT_INVARIANT
     _print_summary(summary, args.out)
     return 0
 
 
 def _print_summary(summary: dict, out: str) -> None:
     if "particle_steps_per_second" in summary:
-        print(f"{summary['scene']}: {summary['cells']} cells, {summary['steps']} steps "
-              f"({summary['simulated_seconds'] / 3600:.2f} h simulated) in {summary['wall_seconds']:.1f} s wall, "
-              f"{summary['particle_steps_per_second'] / 1e6:.1f} M particle-steps/s")
+        from .run import duration
+        # this session's steps with this session's wall time (after --resume, the totals follow, labelled)
+        steps = summary.get("steps_this_session", summary["steps"])
+        line = (f"{summary['scene']}: {summary['cells']} cells, {steps} steps "
+                f"({duration(summary.get('simulated_seconds_this_session', summary['simulated_seconds']))} "
+                f"simulated) in {summary['wall_seconds']:.1f} s wall, "
+                f"{summary['particle_steps_per_second'] / 1e6:.1f} M particle-steps/s")
+        if summary.get("sessions", 1) > 1:
+            line += (f"; run total over {summary['sessions']} sessions: {summary['steps']} steps, "
+                     f"{duration(summary['simulated_seconds'])} simulated, {summary['wall_seconds_total']:.1f} s wall")
+        print(line)
     else:
         print(f"{summary['scene']}: {summary['status']} {summary.get('source_trajectory', '')}")
     for k, f in summary.get("files", {}).items():
@@ -168,22 +224,32 @@ def _print_summary(summary: dict, out: str) -> None:
 
 
 def cmd_render(args) -> int:
-    if not os.path.isfile(args.trajectory):
-        return _fail(f"trajectory {args.trajectory} not found")
-    from .render import render_trajectory
-    out = args.out or os.path.splitext(args.trajectory)[0] + (".strain" if args.color == "strain" else "") + ".mp4"
+    # a file render cannot use, or --color strain without logged strain: one line before any frame is written
+    from .trajectory import check_trajectory
+    need = {}
+    if args.color == "strain":
+        need["log/bonds/strain_energy_J"] = ("--color strain needs the strain energy logged: use another --color, "
+                                             "or rerun the scene with --set output.strain=true")
+    check_trajectory(args.trajectory, need)
+    from .render import make_scale, render_trajectory
+    try:
+        make_scale(args.color, vmin=args.vmin, vmax=args.vmax)
+    except ValueError as e:
+        return _fail(f"render: {e}")
+    suffix = "" if args.color == "speed" else f".{args.color}"     # each colouring its own file
+    out = args.out or os.path.splitext(args.trajectory)[0] + suffix + ".mp4"
     from .run import check_output_dir
     check_output_dir(os.path.dirname(os.path.abspath(out)))
     png = os.path.splitext(out)[0] + ".png"
     n = render_trajectory(args.trajectory, out, color=args.color, size=_size(args.size), fps=args.fps,
-                          every=args.every, png_path=png)
+                          every=args.every, png_path=png, vmin=args.vmin, vmax=args.vmax)
     print(f"{out}: {n} frames; last frame {png}")
     return 0
 
 
 def cmd_analyze(args) -> int:
-    if not os.path.isfile(args.trajectory):
-        return _fail(f"trajectory {args.trajectory} not found")
+    from .trajectory import check_trajectory
+    check_trajectory(args.trajectory)
     from .analysis import analyze, format_summary
     summary = analyze(args.trajectory, out_dir=args.out, every=args.every)
     print(format_summary(summary))
@@ -197,7 +263,9 @@ def cmd_videos(args) -> int:
 
 def cmd_bench(args) -> int:
     from . import bench
-    return bench.main(args.which, quick=args.quick, out_dir=args.out)
+    if args.write_limits and args.which != "stability":
+        return _fail("--write-limits applies to `bench stability` only")
+    return bench.main(args.which, quick=args.quick, out_dir=args.out, write_limits=args.write_limits)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -217,9 +285,13 @@ def main(argv: list[str] | None = None) -> int:
             return cmd_videos(args)
         if args.cmd == "bench":
             return cmd_bench(args)
-    except SceneError as e:
+    except (SceneError, TrajectoryError) as e:
         return _fail(str(e))
     except KeyboardInterrupt:
         print("taichimyxo: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except BrokenPipeError:
+        # the reader went away (`list | head`): not an error of ours; keep Python from complaining at exit
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     return 0

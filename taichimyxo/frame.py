@@ -19,7 +19,7 @@ class Frame:
     positions: np.ndarray           # (n_cells, N, 2) float64 µm; each chain unwrapped (consecutive particles are
                                     # minimum-image neighbours), particle 0 wrapped into the box
     engine_direction: np.ndarray    # (n_cells,) int8, +1: particle 0 is the head, -1: particle N-1 is the head
-    particle_speed: np.ndarray      # (n_cells, N) float32, µm/min, averaged over MODEL.md's short window
+    particle_speed: np.ndarray      # (n_cells, N) float32, µm/min, averaged over docs/model.md's short window
     segment_strain: np.ndarray | None = None   # (n_cells, N-1) float64, J, or None when not computed
     meta: dict = field(default_factory=dict)   # scene name etc., free-form
 

@@ -12,10 +12,25 @@ import json
 import math
 import os
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
-SCENES_DIR = Path(__file__).resolve().parent.parent / "scenes"
+
+def _scenes_dir() -> Path:
+    """Where the scene files are: inside the package in an installed wheel (pyproject.toml maps scenes/ to
+    taichimyxo/scenes), at the top of the clone otherwise (also for an editable install)."""
+    here = Path(__file__).resolve().parent
+    for d in (here / "scenes", here.parent / "scenes"):
+        if d.is_dir() and any(d.glob("*.toml")):
+            return d
+    return here / "scenes"
+
+
+SCENES_DIR = _scenes_dir()
+
+# The densest random start placed reliably and in bounded time (init.py, "Random sequential placement": above
+# 0.40 the tries per cell climb from hundreds to thousands, and past 0.44 placement stalls).
+RANDOM_MAX_AREA_FRACTION = 0.40
 
 
 class SceneError(ValueError):
@@ -51,7 +66,7 @@ SCHEMA: dict[str, dict[str, tuple]] = {
                                       "1e-16 rigid, 1e-15 very rigid)"),
         "engine_force_pN": (_F, 100.0, "pos", "engine force F_e per cell, pN"),
         "speed_um_per_min": (_F, 4.0, "pos", "free-cell speed v_b, µm/min (sets the drag)"),
-        "drag_ratio_normal": (_F, 0.5, "pos", "zeta_n / zeta_t [decision, MODEL.md]"),
+        "drag_ratio_normal": (_F, 0.5, "pos", "zeta_n / zeta_t [decision, docs/model.md]"),
     },
     "collisions": {
         "k_c_N_per_m": (_F, 0.01, "pos", "collision stiffness k_c, N/m (low density 0.01, high 0.002)"),
@@ -88,8 +103,14 @@ SCHEMA: dict[str, dict[str, tuple]] = {
         "speed_window_s": (_F, 1.0, "pos", "window over which displayed speeds are averaged, s"),
     },
     "output": {
-        "frame_interval_min": (_F, 1.0, "pos", "simulated minutes between frames"),
-        "color": (_S, "speed", ("speed", "strain"), "what the movie colours segments by"),
+        "frame_interval_min": (_F, 1.0, "pos", "simulated minutes between movie frames"),
+        "trajectory_interval_min": (_F, 0.0, "nonneg", "simulated minutes between trajectory frames; "
+                                    "0 = output.frame_interval_min"),
+        "color": (_S, "speed", ("speed", "strain", "identity", "polarity", "orientation"),
+                  "what the movie colours by: segment speed or strain; cell identity, polarity or axis angle"),
+        "color_min": (_F, 0.0, "nonneg", "lower end of the colour scale for speed (µm/min) or strain (J); "
+                      "color_min = color_max = 0: the colouring's default range (0-16 µm/min, 1e-21-1e-17 J)"),
+        "color_max": (_F, 0.0, "nonneg", "upper end of the colour scale for speed (µm/min) or strain (J)"),
         "video_width": (_I, 1920, ("range", 64, 7680), "movie width, px"),
         "video_height": (_I, 1080, ("range", 64, 4320), "movie height, px"),
         "fps": (_F, 10.0, "pos", "movie frames per second"),
@@ -175,6 +196,33 @@ def parse_set(items: list[str]) -> dict:
     return out
 
 
+def toml_value(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, float)):
+        return repr(v)
+    return json.dumps(v, ensure_ascii=False)      # a JSON string is a valid TOML basic string
+
+
+def to_toml(scene: "Scene") -> str:
+    """The resolved scene as a TOML file: every key with its value (defaults included, after --set and --preview),
+    its meaning as a comment. Loading the text back gives the same scene (--preview's scaling already applied)."""
+    lines = [f"# {scene.name}: resolved from {scene.source or 'defaults'}"]
+    if scene.preview_scaled:
+        lines.append("# --preview scaled " + ", ".join(f"{k} (from {v!r})" for k, v in scene.preview_scaled.items()))
+    notes = {("run", "dt_ms"): f"resolves to {scene.dt * 1e3:g} ms",
+             ("output", "trajectory_interval_min"): f"resolves to "
+             f"{scene.trajectory_every_steps * scene.dt / 60:g} min"}
+    for sec, keys in SCHEMA.items():
+        lines += ["", f"[{sec}]"]
+        width = max(len(f"{k} = {toml_value(scene.raw[sec][k])}") for k in keys)
+        for k, (_, _, _, doc) in keys.items():
+            entry = f"{k} = {toml_value(scene.raw[sec][k])}"
+            note = f"{doc}" + (f"; {notes[(sec, k)]}" if (sec, k) in notes and scene.raw[sec][k] == 0 else "")
+            lines.append(f"{entry:<{width}}  # {note}")
+    return "\n".join(lines) + "\n"
+
+
 def available_scenes() -> list[str]:
     if not SCENES_DIR.is_dir():
         return []
@@ -204,6 +252,8 @@ class Scene:
     """A validated scene. `raw` holds the values in scene-file units; properties give internal units."""
     raw: dict
     source: str = ""
+    # "section.key" -> the value before --preview scaled it (values the user set are never scaled)
+    preview_scaled: dict = field(default_factory=dict)
 
     # ---- construction
     @classmethod
@@ -218,36 +268,65 @@ class Scene:
     @classmethod
     def from_dict(cls, data: dict, overrides: dict | None = None, preview: bool = False, where: str = "scene",
                   default_name: str = "") -> "Scene":
+        """preview: the scene's box side scaled by preview.scale (cells with the area), its duration capped at
+        preview.hours, frames every preview.frame_interval_min, a small movie; a value given in `overrides` (--set
+        and the command line's options) is the user's and is never rescaled."""
         raw = defaults()
         _merge(raw, data, where)
         if overrides:
             _merge(raw, overrides, "--set")
         if not raw["scene"]["name"]:
             raw["scene"]["name"] = default_name or "scene"
+        scaled = {}
         if preview:
+            user = {(sec, k) for sec, body in (overrides or {}).items() for k in body}
+
+            def scale(sec, key, value):
+                if (sec, key) not in user and raw[sec][key] != value:
+                    scaled[f"{sec}.{key}"] = raw[sec][key]
+                    raw[sec][key] = value
+
             s = raw["preview"]["scale"]
-            raw["domain"]["width_um"] *= s
-            raw["domain"]["height_um"] *= s
+            scale("domain", "width_um", raw["domain"]["width_um"] * s)
+            scale("domain", "height_um", raw["domain"]["height_um"] * s)
             if raw["population"]["cells"]:
-                raw["population"]["cells"] = max(1, round(raw["population"]["cells"] * s * s))
-            raw["run"]["hours"] = min(raw["run"]["hours"], raw["preview"]["hours"])
-            raw["output"]["frame_interval_min"] = raw["preview"]["frame_interval_min"]
-            raw["output"]["video_width"] = min(raw["output"]["video_width"], 640)
-            raw["output"]["video_height"] = min(raw["output"]["video_height"], 480)
+                scale("population", "cells", max(1, round(raw["population"]["cells"] * s * s)))
+            scale("run", "hours", min(raw["run"]["hours"], raw["preview"]["hours"]))
+            scale("output", "frame_interval_min", raw["preview"]["frame_interval_min"])
+            scale("output", "video_width", min(raw["output"]["video_width"], 640))
+            scale("output", "video_height", min(raw["output"]["video_height"], 480))
             raw["scene"]["name"] += "-preview" if not raw["scene"]["name"].endswith("-preview") else ""
-        sc = cls(raw=raw, source=where)
+        sc = cls(raw=raw, source=where, preview_scaled=scaled)
         sc.validate()
         return sc
 
     def with_overrides(self, overrides: dict) -> "Scene":
         raw = copy.deepcopy(self.raw)
         _merge(raw, overrides, "override")
-        sc = Scene(raw=raw, source=self.source)
+        scaled = {k: v for k, v in self.preview_scaled.items()
+                  if k.split(".")[1] not in overrides.get(k.split(".")[0], {})}
+        sc = Scene(raw=raw, source=self.source, preview_scaled=scaled)
         sc.validate()
         return sc
 
+    def preview_note(self) -> str:
+        """'' or, for a --preview scene, what --preview scaled and from what, to append to an error message."""
+        # the sizes an error can be about (the movie's size and frame interval never make a scene invalid)
+        keys = [k for k in self.preview_scaled if k.split(".")[0] in ("domain", "population", "run")]
+        if not keys:
+            return ""
+        items = ", ".join(f"{k} from {self.preview_scaled[k]:g} to {self.raw[k.split('.')[0]][k.split('.')[1]]:g}"
+                          for k in keys)
+        return f" (--preview scaled {items}; values given with --set are not scaled)"
+
     def validate(self) -> None:
-        """Cross-key checks (single keys were checked on merge)."""
+        """Cross-key checks (single keys were checked on merge); errors say what --preview scaled."""
+        try:
+            self._validate()
+        except SceneError as e:
+            raise SceneError(f"{e}{self.preview_note()}") from None
+
+    def _validate(self) -> None:
         Lx, Ly = self.box
         if min(Lx, Ly) < 2 * self.length:
             raise SceneError(f"domain.width_um x domain.height_um = {Lx:g} x {Ly:g} µm: each side must be at least two "
@@ -256,8 +335,8 @@ class Scene:
             raise SceneError(f"cell.width_um = {self.width:g} must be smaller than cell.length_um = {self.length:g}")
         if self.n_cells < 1:
             raise SceneError(f"population gives {self.n_cells} cells in {Lx:g} x {Ly:g} µm; need at least 1")
-        af = self.n_cells * self.length * self.width / (Lx * Ly)
-        limit = {"random": 0.5, "aligned": 1.0 + 1e-9, "spiral": 0.9}[self.start]
+        af = self.area_fraction
+        limit = {"random": RANDOM_MAX_AREA_FRACTION, "aligned": 1.0 + 1e-9, "spiral": 0.9}[self.start]
         if af > limit:
             c = self.raw["population"]["cells"]
             given = (f"population.cells = {c}" if c else
@@ -275,6 +354,22 @@ class Scene:
             raise SceneError("run.dt_ms resolved to zero")
         if self.hours * 3600 < self.dt:
             raise SceneError(f"run.hours = {self.hours:g} is shorter than one step")
+        o = self.raw["output"]
+        if o["color_min"] or o["color_max"]:
+            if o["color"] not in ("speed", "strain"):
+                raise SceneError(f"output.color_min/color_max set a range for speed or strain; output.color = "
+                                 f"{o['color']!r} has no range")
+            if not o["color_max"] > o["color_min"]:
+                raise SceneError(f"output.color_max = {o['color_max']:g} must be above output.color_min = "
+                                 f"{o['color_min']:g}")
+            if o["color"] == "strain" and o["color_min"] <= 0:
+                raise SceneError("output.color_min must be positive for strain (a log scale), e.g. 1e-21")
+
+    @property
+    def color_range(self) -> dict:
+        """Render options for the movie's colour range (empty: the colouring's default)."""
+        o = self.raw["output"]
+        return {"vmin": o["color_min"], "vmax": o["color_max"]} if (o["color_min"] or o["color_max"]) else {}
 
     # ---- names and bookkeeping
     @property
@@ -311,6 +406,12 @@ class Scene:
         return int(round(per_um2 * Lx * Ly))
 
     @property
+    def area_fraction(self) -> float:
+        """n L W / box area: 0.125 at the paper's low density, 1.0 at its high density."""
+        Lx, Ly = self.box
+        return self.n_cells * self.length * self.width / (Lx * Ly)
+
+    @property
     def N(self) -> int:
         return self.raw["cell"]["particles"]
 
@@ -324,7 +425,7 @@ class Scene:
 
     @property
     def rest_length(self) -> float:
-        """l0: the chain spans L - W [decision, MODEL.md]."""
+        """l0: the chain spans L - W [decision, docs/model.md]."""
         return (self.length - self.width) / (self.N - 1)
 
     @property
@@ -408,6 +509,12 @@ class Scene:
     @property
     def frame_every_steps(self) -> int:
         return max(1, int(round(self.raw["output"]["frame_interval_min"] * 60.0 / self.dt)))
+
+    @property
+    def trajectory_every_steps(self) -> int:
+        """Steps between trajectory frames (output.trajectory_interval_min; 0: the movie's frame interval)."""
+        m = self.raw["output"]["trajectory_interval_min"]
+        return self.frame_every_steps if m == 0 else max(1, int(round(m * 60.0 / self.dt)))
 
     @property
     def strain(self) -> bool:

@@ -6,8 +6,9 @@ Schema (see README "Trajectory format"):
   particles.image (Np, 3) int32 so that position + image * L gives every cell's chain unwrapped.
   Particles are stored cell by cell: particle i belongs to cell i // N and is number i % N along it.
   particles.types = ["pole", "body"]: the two end particles of each cell are "pole".
-- bonds.group (Nb, 2): the segments, (i, i+1) within each cell; bonds.types = ["segment"].
-- log/particles/speed_um_per_min (Np,) float32: particle speed averaged over the speed window (MODEL.md).
+- bonds.group (Nb, 2): the segments, (i, i+1) within each cell; bonds.types = ["segment"]. Given in every frame
+  (gsd stores them once, in frame 0, and later frames inherit them, as the HOOMD schema defines).
+- log/particles/speed_um_per_min (Np,) float32: particle speed averaged over the speed window (docs/model.md).
 - log/particles/engine_direction (Np,) int8: the cell's k_e (+1: particle 0 of the cell is the head).
 - log/bonds/strain_energy_J (Nb,) float32: per-segment strain energy, only when the scene asks for it.
 - log/taichimyxo/time_s (1,) float64: simulated time, s.
@@ -79,14 +80,16 @@ class TrajectoryWriter:
         tid[:, -1] = 0
         g.particles.typeid = tid.reshape(-1)
         g.particles.diameter = np.full(Np, fr.width_um, np.float32)
+        # the bonds in every frame: a frame without them would store bonds.N = 0 and readers (OVITO, freud,
+        # MDAnalysis) would show none after frame 0. gsd.hoomd writes a chunk only where it differs from frame 0,
+        # so later frames inherit frame 0's bonds, as the HOOMD schema defines, at no cost in file size.
+        nb = n_cells * (N - 1)
+        base = (np.arange(n_cells) * N)[:, None] + np.arange(N - 1)[None, :]
+        g.bonds.N = nb
+        g.bonds.types = ["segment"]
+        g.bonds.typeid = np.zeros(nb, np.uint32)
+        g.bonds.group = np.stack([base.reshape(-1), base.reshape(-1) + 1], axis=1).astype(np.uint32)
         if self._first:
-            nb = n_cells * (N - 1)
-            base = (np.arange(n_cells) * N)[:, None] + np.arange(N - 1)[None, :]
-            grp = np.stack([base.reshape(-1), base.reshape(-1) + 1], axis=1).astype(np.uint32)
-            g.bonds.N = nb
-            g.bonds.types = ["segment"]
-            g.bonds.typeid = np.zeros(nb, np.uint32)
-            g.bonds.group = grp
             meta = dict(self.scene_dict)
             meta.setdefault("_schema_version", SCHEMA_VERSION)
             meta.setdefault("_width_um", fr.width_um)
@@ -111,6 +114,48 @@ class TrajectoryWriter:
 
     def __exit__(self, *exc):
         self.close()
+
+
+class TrajectoryError(ValueError):
+    """A file that cannot be read as a trajectory of cells, or lacks a logged quantity; one line for the user."""
+
+
+def check_trajectory(path: str, need_logs: dict | None = None) -> int:
+    """Refuse, before any work, a file `render` or `analyze` cannot use: missing, not GSD, not the HOOMD schema,
+    no frames, no chains of particles (neither our stored scene nor bonds), or without a logged quantity the caller
+    needs (need_logs: {"log/...": "what to do about it"}; checked in the first and the last frame).
+    Returns the number of frames."""
+    if not os.path.isfile(path):
+        raise TrajectoryError(f"trajectory {path} not found")
+    try:
+        t = _gsd().open(path, "r")
+    except (RuntimeError, OSError, ValueError) as e:
+        raise TrajectoryError(f"{path} is not a GSD trajectory ({str(e).splitlines()[0] if str(e) else e!r})") \
+            from None
+    try:
+        n = len(t)
+        if n == 0:
+            raise TrajectoryError(f"{path}: the trajectory has no frames")
+        f0 = t[0]
+        has_scene = f0.log.get("taichimyxo/scene_json") is not None
+        if int(f0.particles.N) == 0 or (not has_scene and int(f0.bonds.N) == 0):
+            raise TrajectoryError(f"{path} holds no cells: neither a taichimyxo scene (log/taichimyxo/scene_json) "
+                                  f"nor bonds joining its particles into chains")
+        for key, fix in (need_logs or {}).items():
+            for i in sorted({0, n - 1}):
+                if t.file.chunk_exists(frame=i, name=key):
+                    continue
+                # a log written only in frame 0 is inherited by later frames
+                if i > 0 and t.file.chunk_exists(frame=0, name=key):
+                    continue
+                raise TrajectoryError(f"{path}: frame {i} has no {key}; {fix}")
+    except TrajectoryError:
+        raise
+    except (RuntimeError, OSError, ValueError, KeyError) as e:
+        raise TrajectoryError(f"{path} cannot be read as a trajectory ({e})") from None
+    finally:
+        t.close()
+    return n
 
 
 def read_scene(path: str) -> dict:

@@ -1,8 +1,8 @@
 """Regenerate the supplementary videos: `python -m taichimyxo videos [--preview] [--only S3,S8]`.
 
-Runs S1-S17 in order, each in its own process (one Simulation per process: Taichi compiles per instance), skips
-those whose outputs are up to date (same scene fingerprint, completed), resumes an interrupted one from its
-checkpoint, and shows overall progress. Ctrl-C stops after closing the current run's files; run again to continue."""
+Runs S1-S17 in order (or the scenes --only names: any that `list` shows), each in its own process (one Simulation
+per process: Taichi compiles per instance), skips those whose outputs are up to date (same scene fingerprint,
+completed), resumes an interrupted one from its checkpoint, and shows overall progress. Ctrl-C stops after closing the current run's files; run again to continue."""
 from __future__ import annotations
 
 import json
@@ -11,7 +11,7 @@ import sys
 import time
 from pathlib import Path
 
-from .scene import Scene, SceneError
+from .scene import Scene, SceneError, available_scenes
 
 VIDEO_SCENES = [f"S{i}" for i in range(1, 18)]
 
@@ -35,19 +35,21 @@ def _up_to_date(sc: Scene, out: Path) -> bool:
 def regenerate(preview: bool = False, only: str | None = None, out_dir: str = "videos", arch: str = "cpu") -> int:
     names = VIDEO_SCENES
     if only:
+        # any scene `list` shows (the supplementary videos S1-S17 and the figure panels such as S2FigA)
+        known = available_scenes()
         names = [n.strip() for n in only.split(",") if n.strip()]
-        unknown = [n for n in names if n not in VIDEO_SCENES]
-        if unknown:
-            raise SceneError(f"--only: unknown video {', '.join(unknown)}; available: S1-S17")
+        unknown = [n for n in names if n not in known]
+        if unknown or not names:
+            raise SceneError(f"--only: unknown scene {', '.join(unknown) or repr(only)}; available: "
+                             f"{', '.join(known)}")
     from .run import check_output_dir
     out = check_output_dir(out_dir)
-    scenes = [Scene.load(n, {}, preview=preview) for n in names]      # validate all before running any
-    todo = [sc for sc in scenes if not _up_to_date(sc, out)]
+    scenes = [(n, Scene.load(n, {}, preview=preview)) for n in names]      # validate all before running any
+    todo = [(n, sc) for n, sc in scenes if not _up_to_date(sc, out)]
     print(f"videos: {len(scenes) - len(todo)} of {len(scenes)} up to date in {out}; {len(todo)} to make",
           flush=True)
     t0 = time.time()
-    for i, sc in enumerate(todo, 1):
-        name = sc.name[:-len("-preview")] if preview and sc.name.endswith("-preview") else sc.name
+    for i, (name, sc) in enumerate(todo, 1):
         cmd = [sys.executable, "-m", "taichimyxo", "scene", name, "--out", str(out), "--arch", arch]
         if preview:
             cmd.append("--preview")

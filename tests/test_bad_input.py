@@ -90,7 +90,7 @@ def test_malformed_toml_gives_line_and_column(out_with_files, tmp_path):
     ("[cell]\nparticles = 2\n", ["cell.particles", "between 3 and 64"]),
     ("[domain]\nwidth_um = 9.99\nheight_um = 50\n", ["domain.width_um", "two cell lengths"]),
     ("[population]\ndensity_cells_per_cm2 = 3e7\n", ["population.density_cells_per_cm2", "'random' start",
-                                                      "at most 0.50"]),
+                                                      "at most 0.40"]),
     ('[population]\nstart = "aligned"\ndensity_cells_per_cm2 = 5e7\n', ["population.density_cells_per_cm2",
                                                                         "'aligned' start"]),
 ], ids=["unknown-key", "unknown-section", "wrong-type", "not-an-integer", "not-a-bool", "not-allowed", "zero",

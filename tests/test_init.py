@@ -7,7 +7,7 @@ import sys
 import numpy as np
 import pytest
 
-from simtools import contact_pairs
+from taichimyxo.geometry import sample_polyline_contacts
 from taichimyxo.geometry import closest_points, min_image
 from taichimyxo.init import initial_configuration
 from taichimyxo.scene import Scene
@@ -54,14 +54,20 @@ def test_spiral_start_cells_head_to_tail():
     assert (ke == 1).all()
     heads = pos[:, 0]
     tails = pos[:, -1]
-    # each cell's tail is just behind the next cell's... i.e. cell c's head is within guiding range of c+1's tail
-    gaps = np.linalg.norm(heads[:-1] - tails[1:], axis=1) - sc.width
+    # cell c follows cell c - 1: its head is within guiding range of its leader's tail
+    gaps = np.linalg.norm(heads[1:] - tails[:-1], axis=1) - sc.width
     assert gaps.max() < 0.25 and gaps.min() > 0.0
+    # leaders inward (the paper's S5 Fig): every head is nearer the axis than its own tail, and every trailing cell
+    # is further from the axis than its leader
+    axis = np.array(sc.box) / 2
+    r = lambda p: np.linalg.norm(p - axis, axis=-1)
+    assert np.all(r(heads) < r(tails))
+    assert np.all(np.diff(r(pos.mean(axis=1))) > 0)
     seg = np.linalg.norm(np.diff(pos, axis=1), axis=-1)
     np.testing.assert_allclose(seg, sc.rest_length, rtol=1e-9)
     # turns W apart: neighbouring turns touch but do not overlap by more than 1 % of W
-    pairs = contact_pairs(pos[:60], sc.box, sc.width)
-    assert all(p[4] > 0.99 * sc.width for p in pairs)
+    d = sample_polyline_contacts(pos[:60], sc.box, sc.width)[3]
+    assert np.all(d > 0.99 * sc.width)
     # the spiral fits in the box, centred
     assert np.abs(pos.reshape(-1, 2) - 50.0).max() < 50.0
 

@@ -66,8 +66,11 @@ def test_single_cell_has_its_speed_colour_and_background_elsewhere():
     speed = 6.0
     fr = make_frame([straight_cell((6.0, 10.0), (14.0, 10.0))], [speed])
     img = render_frame(fr, size=SIZE)
-    vp = get_renderer(BOX, SIZE, "speed").viewport
-    assert img.shape == (SIZE[1], SIZE[0], 3) and img.dtype == np.uint8
+    r = get_renderer(BOX, SIZE, "speed")
+    vp = r.viewport
+    w, h = r.size                                                        # fitted to the square box within SIZE
+    assert img.shape == (h, w, 3) and img.dtype == np.uint8
+    assert h == SIZE[1] and w <= SIZE[0] and w % 2 == 0 and h % 2 == 0
     want = turbo(speed / 16.0)
     assert np.array_equal(pixel(img, vp, (10.0, 10.0)), want)            # the centre of the cell
     for x in np.linspace(6.0, 14.0, 9):                                   # along the whole axis, caps included
@@ -168,10 +171,14 @@ def test_viewport_round_trip_and_layout():
     assert nice_scalebar_length(100.0) == 25.0
 
 
-def test_time_is_shown_as_h_mm():
-    assert format_time(0.0) == "t = 0:00 h"
-    assert format_time(3 * 3600 + 45 * 60 + 59.0) == "t = 3:45 h"
-    assert format_time(59.99999999) == "t = 0:01 h"
+def test_time_is_shown_as_h_min():
+    assert format_time(0.0) == "t = 0 min"
+    assert format_time(6 * 60.0) == "t = 6 min"                          # not "0:06 h", which reads as 0.06 h
+    assert format_time(59 * 60.0 + 59.0) == "t = 59 min"
+    assert format_time(3600.0) == "t = 1 h 00 min"
+    assert format_time(65 * 60.0) == "t = 1 h 05 min"
+    assert format_time(3 * 3600 + 45 * 60 + 59.0) == "t = 3 h 45 min"
+    assert format_time(59.99999999) == "t = 1 min"
     a = render_frame(make_frame([straight_cell((6, 10), (14, 10))], [3.0], time_s=0.0), size=SIZE)
     b = render_frame(make_frame([straight_cell((6, 10), (14, 10))], [3.0], time_s=3600.0), size=SIZE)
     diff = np.any(a != b, axis=-1)
@@ -209,6 +216,8 @@ def test_mp4_opens_with_expected_frames_and_size(tmp_path):
         assert vw.size == (322, 242)                                      # forced even for yuv420p
         for fr in frames:
             vw.append(fr)
+        w, h = vw.size                                                     # the square box's frame within it
+        assert h == 242 and w < 322 and w % 2 == 0
     vw.close()                                                             # idempotent
     assert vw.closed and vw.frames_written == 5
     assert verify_video(path, 5) == 5
@@ -219,10 +228,11 @@ def test_mp4_opens_with_expected_frames_and_size(tmp_path):
     finally:
         rd.close()
     assert len(imgs) == 5
-    assert imgs[0].shape == (242, 322, 3)
+    assert imgs[0].shape == (h, w, 3)
     assert meta["codec"] == "h264" and abs(meta["fps"] - 10) < 1e-6
     # the decoded picture is the rendered one, up to compression
     ref = render_frame(frames[-1], size=(322, 242), title="test").astype(int)
+    assert ref.shape == (h, w, 3)
     assert np.abs(imgs[-1].astype(int) - ref).mean() < 6
     with pytest.raises(ValueError):
         vw.append(frames[0])
