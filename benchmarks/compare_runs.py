@@ -22,12 +22,10 @@ def frame_stats(fr, v_b: float = 4.0) -> dict:
 
     pos = fr.positions
     n = len(pos)
-    labels = cell_clusters(pos, fr.box, fr.width_um)
-    labels = labels[0] if isinstance(labels, tuple) else labels
-    sizes = np.bincount(np.asarray(labels))
+    _, sizes, _, _ = cell_clusters(pos, fr.box, fr.width_um)
     big = sizes[sizes >= 10]
     aggs = find_aggregates(fr, v_b=v_b)
-    c, h, b, d = sample_polyline_contacts(pos, fr.box, fr.width_um)
+    d = sample_polyline_contacts(pos, fr.box, fr.width_um)[3]
     cell_speed = fr.particle_speed.mean(axis=1)
     return {
         "cells": n,
@@ -37,8 +35,8 @@ def frame_stats(fr, v_b: float = 4.0) -> dict:
         "mean_cluster_size_ge10": float(big.mean()) if len(big) else 0.0,
         "largest_cluster": int(sizes.max()),
         "rotating_aggregates": len(aggs),
-        "cells_in_aggregates_pct": 100.0 * sum(a.get("n_cells", 0) for a in aggs) / n,
-        "aggregate_radii_um": [round(float(a.get("radius_um", a.get("radius", 0.0))), 1) for a in aggs],
+        "cells_in_aggregates_pct": 100.0 * sum(a["n_cells"] for a in aggs) / n,
+        "aggregate_radii_um": [round(float(a["radius_um"]), 1) for a in aggs],
         "contacts_per_cell": len(d) / n,
         "mean_overlap_um": float((fr.width_um - d).mean()) if len(d) else 0.0,
         "speed_mean_um_min": float(cell_speed.mean()),

@@ -8,7 +8,7 @@ import argparse
 import os
 import sys
 
-from .scene import SCHEMA, Scene, SceneError, available_scenes, parse_set, resolve_path, to_toml, toml_value
+from .scene import SCHEMA, Scene, SceneError, available_scenes, parse_set, to_toml, toml_value
 from .trajectory import TrajectoryError
 
 EXIT_BAD_INPUT = 2

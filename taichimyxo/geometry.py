@@ -57,9 +57,14 @@ def contact_samples(pos):
     pts = np.empty((n, 2 * N - 1, 2))
     pts[:, 0::2] = pos
     pts[:, 1::2] = 0.5 * (pos[:, 1:] + pos[:, :-1])
+    return pts, sample_weights(N), np.arange(2 * N - 1)
+
+
+def sample_weights(N: int) -> np.ndarray:
+    """Contact weight of each of a cell's 2N - 1 samples: 1/4, the two poles 1/2 (docs/model.md term 4)."""
     w = np.full(2 * N - 1, 0.25)
     w[0] = w[-1] = 0.5
-    return pts, w, np.arange(2 * N - 1)
+    return w
 
 
 def sample_polyline_contacts(pos, box, W: float):
@@ -111,5 +116,5 @@ def contact_energy(pos, box, W: float, k_c: float) -> float:
     """The contact energy (pN·µm): sum over samples p and chains B of w_p k_c / 2 (W - D)^2, D the distance from
     the sample to the chain (see sample_polyline_contacts)."""
     _, h, _, d = sample_polyline_contacts(pos, box, W)
-    _, w, _ = contact_samples(np.zeros((1, (len(np.asarray(pos)[0]) if len(pos) else 2), 2)))
+    w = sample_weights(np.asarray(pos).shape[1])
     return float(0.5 * k_c * (w[h] * (W - d) ** 2).sum())

@@ -50,7 +50,7 @@ import math
 import taichi as ti
 
 from .scene import SceneError
-from .sim import Simulation, _min_image, _perp
+from .sim import Simulation, _perp
 
 CONTACT_MODES = ("coupled", "diagonal", "explicit")
 DEFAULT_TOL = 1e-3
@@ -334,14 +334,14 @@ class ImplicitSimulation(Simulation):
 
     # ------------------------------------------------------------------ end of step (shared by the modes)
     @ti.func
-    def _advance_cell(self, c, dt, check_skin):
+    def _advance_cell(self, c, dt):
         """x_n+1 = x_n + dt v for cell c, wrap, skin flag, slime claim, reversal clock (as the explicit step)."""
         N = ti.static(self.cfg.N)
         moved = 0
         for k in range(N):
             p = c * N + k
             v = ti.Vector([self.vel[2 * p], self.vel[2 * p + 1]])
-            moved |= self._store_position(p, self.x[p] + ti.cast(v * dt, self.pdt), check_skin)
+            moved |= self._store_position(p, self.x[p] + ti.cast(v * dt, self.pdt))
         self._finish_cell(c, moved)
 
     @ti.func
@@ -356,7 +356,7 @@ class ImplicitSimulation(Simulation):
 
     # ------------------------------------------------------------------ kernels
     @ti.kernel
-    def _imex_begin(self, dt: ti.f64, check_skin: ti.i32):
+    def _imex_begin(self, dt: ti.f64):
         """Forces, per-cell assembly and factorisation. Without coupled contacts the per-cell solve is the whole
         step; with them, the CG start: r = F - A v_prev, u = M^-1 r, w = A u (v_prev: last step's velocities)."""
         C = ti.static(self.cfg.n_cells)
@@ -373,7 +373,7 @@ class ImplicitSimulation(Simulation):
                 self._load_cell(c)
                 self._factor(c, dtf)
                 self._solve(c, self.rhs, self.vel)
-                self._advance_cell(c, dt, check_skin)
+                self._advance_cell(c, dt)
             self._slime_pass(False)
             ti.loop_config(serialize=True)
             for _ in range(1):
@@ -448,7 +448,7 @@ class ImplicitSimulation(Simulation):
             self.part[b, 1] = d
 
     @ti.kernel
-    def _imex_iterate(self, dt: ti.f64, check_skin: ti.i32):
+    def _imex_iterate(self, dt: ti.f64):
         """`iters_per_launch` CG iterations (skipped once converged), then the position update if converged."""
         C = ti.static(self.cfg.n_cells)
         bs = ti.static(self.bs)
@@ -496,14 +496,14 @@ class ImplicitSimulation(Simulation):
                             self.cgs[4] = be
                             self.cgs[3] = gam / den
                             self.cgs[0] = gam
-        self._finish(dt, check_skin)
+        self._finish(dt)
 
     @ti.func
-    def _finish(self, dt, check_skin):
+    def _finish(self, dt):
         ti.loop_config(serialize=self.serial)
         for c in range(self.cfg.n_cells):
             if self.cgi[0] == 1:
-                self._advance_cell(c, dt, check_skin)
+                self._advance_cell(c, dt)
                 base = c * self.n2
                 for i in range(self.n2):
                     self.vprev[base + i] = self.vel[base + i]
@@ -514,21 +514,21 @@ class ImplicitSimulation(Simulation):
                 self.cgi[0] = 2
 
     @ti.kernel
-    def _imex_finish(self, dt: ti.f64, check_skin: ti.i32):
+    def _imex_finish(self, dt: ti.f64):
         ti.loop_config(serialize=True)
         for _ in range(1):
             self.cgi[0] = 1
-        self._finish(dt, check_skin)
+        self._finish(dt)
 
-    def _step(self, dt, check_skin):
+    def _step(self, dt):
         """One linearly implicit step (module docstring). Replaces the explicit kernel; run() drives it. Returns the
         neighbour-list flag (a particle moved past half the skin), as the explicit kernel does."""
-        self._imex_begin(dt, check_skin)
+        self._imex_begin(dt)
         if self.coupled:
             for _ in range(math.ceil(self.max_iter / self.iters_per_launch) + 1):
-                self._imex_iterate(dt, check_skin)
+                self._imex_iterate(dt)
                 if self.cgi[0] == 2:
                     break
             else:
-                self._imex_finish(dt, check_skin)
+                self._imex_finish(dt)
         return self.flags[1]

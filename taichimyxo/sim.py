@@ -237,7 +237,6 @@ class Simulation:
 
     # ------------------------------------------------------------------ state
     def set_state(self, positions, engine_direction, step: int = 0) -> None:
-        cfg = self.cfg
         pos = np.asarray(positions, dtype=np.float64).reshape(self.cfg.n_cells, self.cfg.N, 2)
         L = np.array([self.cfg.Lx, self.cfg.Ly])
         self.x.from_numpy(np.mod(pos, L).reshape(-1, 2).astype(np.float64 if self.pdt == ti.f64 else np.float32))
@@ -248,7 +247,6 @@ class Simulation:
 
     def positions(self) -> np.ndarray:
         """(n_cells, N, 2) float64, chains unwrapped, particle 0 in the box."""
-        cfg = self.cfg
         return unwrap_chains(self.x.to_numpy().astype(np.float64).reshape(self.cfg.n_cells, self.cfg.N, 2), (self.cfg.Lx, self.cfg.Ly))
 
     @property
@@ -745,7 +743,7 @@ class Simulation:
 
     # ------------------------------------------------------------------ the step
     @ti.kernel
-    def _step(self, dt: ti.f64, check_skin: ti.i32) -> ti.i32:
+    def _step(self, dt: ti.f64) -> ti.i32:
         """One explicit step (docs/model.md "Equation of motion"): forces at x_n, then the semi-implicit Euler step of
         m dv/dt = F - zeta v with the drag implicit, v_n+1 = (m v_n + dt F) / (m + dt zeta) per axis (t, n);
         x_n+1 = x_n + dt v_n+1. With m = 0 this is the overdamped step v = F_t / zeta_t + F_n / zeta_n."""
@@ -774,7 +772,7 @@ class Simulation:
                 else:
                     v = ft / self.cfg.zeta_t * t + fn / self.cfg.zeta_n * n
                 xn = x0 + ti.cast(ti.Vector([X[k, 0], X[k, 1]]) + v * dt, self.pdt)
-                moved |= self._store_position(c * N + k, xn, check_skin)
+                moved |= self._store_position(c * N + k, xn)
             self._finish_cell(c, moved)
         if ti.static(self.cfg.slime):
             ti.loop_config(serialize=self.serial)
@@ -785,16 +783,15 @@ class Simulation:
         return self.flags[1]
 
     @ti.func
-    def _store_position(self, p, xn, check_skin):
+    def _store_position(self, p, xn):
         """Wrap and store particle p's new position; 1 if it has moved past half the skin since the list build."""
         xn[0] -= self.cfg.Lx * ti.floor(xn[0] / self.cfg.Lx)
         xn[1] -= self.cfg.Ly * ti.floor(xn[1] / self.cfg.Ly)
         self.x[p] = xn
         moved = 0
-        if check_skin:
-            dd = _min_image(xn - self.x_ref[p], self.cfg.Lx, self.cfg.Ly)
-            if dd.dot(dd) > (0.5 * self.cfg.skin) ** 2:
-                moved = 1
+        dd = _min_image(xn - self.x_ref[p], self.cfg.Lx, self.cfg.Ly)
+        if dd.dot(dd) > (0.5 * self.cfg.skin) ** 2:
+            moved = 1
         return moved
 
     @ti.func
@@ -862,7 +859,7 @@ class Simulation:
         dt = self.cfg.dt if dt is None else dt
         for _ in range(n_steps):
             self.step_count += 1
-            if self._step(dt, 1):
+            if self._step(dt):
                 self.rebuild_neighbours()
 
     # ------------------------------------------------------------------ measurements
@@ -879,7 +876,6 @@ class Simulation:
 
     def particle_speed(self) -> np.ndarray:
         """(n_cells, N) µm/min averaged since the last snapshot_speed (instantaneous if none since)."""
-        cfg = self.cfg
         L = np.array([self.cfg.Lx, self.cfg.Ly])
         steps = self.step_count - getattr(self, "_snap_step", self.step_count)
         if steps <= 0:
@@ -926,7 +922,6 @@ class Simulation:
         return self.strain_seg.to_numpy().reshape(self.cfg.n_cells, self.cfg.N - 1) * 1e-18
 
     def frame(self) -> Frame:
-        cfg = self.cfg
         return Frame(time_s=self.time, step=self.step_count, box=(self.cfg.Lx, self.cfg.Ly), width_um=self.cfg.W,
                      positions=self.positions(), engine_direction=self.engine_direction(),
                      particle_speed=self.particle_speed(),

@@ -256,7 +256,7 @@ def test_paper_scale_speed(tmp_path):
     dt = time.perf_counter() - t
     print(f"\nanalysis of {n_frames} frames x 2000 cells: {dt:.2f} s ({dt / n_frames * 1000:.0f} ms/frame)")
     assert s["n_aggregates_final"] == 10
-    assert dt / n_frames < 0.5          # generous (measured ~35 ms/frame on 2 cores): catches O(n^2) regressions
+    # no assertion on dt: timing belongs in benchmarks (TAICHIMYXO_BENCH=1 runs the 360-frame measurement)
 
 
 def test_first_frame_without_speeds_is_geometry_only(tmp_path):

@@ -1,5 +1,4 @@
 """Initial configurations: density, no overlaps, area fraction, spiral head to tail; thread-independent runs."""
-import json
 import os
 import subprocess
 import sys

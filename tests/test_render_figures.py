@@ -261,7 +261,7 @@ def test_mp4_is_readable_while_it_is_being_written(tmp_path):
             vw.append(fr)
         # while the writer is open: wait (not a timing assertion, a generous bound on a busy machine) until ffmpeg
         # has written fragments, then read the partial file as a player would
-        n, deadline = 0, time.monotonic() + 240.0
+        n, deadline = 0, time.monotonic() + 900.0
         while time.monotonic() < deadline:
             try:
                 n = imageio_ffmpeg.count_frames_and_secs(str(path))[0]
