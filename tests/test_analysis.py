@@ -10,8 +10,10 @@ import numpy as np
 import pytest
 
 from taichimyxo.analysis import (analyze, cell_clusters, connected_components, contact_pairs, find_aggregates,
-                                 format_summary, main_analyze, synthetic_frames, write_synthetic)
+                                 format_summary, synthetic_frames, write_synthetic)
+from taichimyxo.cli import main as cli_main
 from taichimyxo.frame import Frame
+from taichimyxo.geometry import min_image
 
 V_B = 4.0
 
@@ -28,9 +30,7 @@ def _n_disk_cells(**disk):
 
 
 def _pdist(a, b, L):
-    d = np.asarray(a, float) - np.asarray(b, float)
-    d -= np.asarray(L) * np.round(d / np.asarray(L))
-    return float(np.hypot(*d))
+    return float(np.hypot(*min_image(np.asarray(a, float) - np.asarray(b, float), L)))
 
 
 # ------------------------------------------------------------------------------------------------ known answers
@@ -207,7 +207,7 @@ def test_cli_entry(tmp_path, capsys):
     write_synthetic(path, v_b=V_B, n_frames=4, box=(80.0, 80.0), disks=[dict(centre=(40.0, 40.0), radius=8.25,
                                                                               omega=0.7)])
     out = tmp_path / "out"
-    assert main_analyze([path, "--out", str(out), "--every", "2", "--no-plots"]) == 0
+    assert cli_main(["analyze", path, "--out", str(out), "--every", "2", "--no-plots"]) == 0
     j = json.load(open(out / "cli.analysis.json"))
     assert j["meta"]["n_frames_analyzed"] == 2 and j["meta"]["every"] == 2
     assert "rotating aggregate" in capsys.readouterr().out
@@ -222,8 +222,7 @@ def test_contact_pairs_match_brute_force(seed):
     rc = 0.8
     i, j = contact_pairs(p, L, rc)
     a, b = np.triu_indices(len(p), 1)
-    d = p[b] - p[a]
-    d -= L * np.round(d / L)
+    d = min_image(p[b] - p[a], L)
     m = (d * d).sum(1) < rc * rc
     assert set(zip(i.tolist(), j.tolist())) == set(zip(a[m].tolist(), b[m].tolist()))
     assert len(i) == m.sum()                     # no duplicates

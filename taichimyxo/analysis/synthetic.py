@@ -1,0 +1,135 @@
+"""Trajectories with known answers (rotating disks, straight streams, a random gas), for the tests and benchmarks."""
+from __future__ import annotations
+
+import math
+from typing import Iterator
+
+import numpy as np
+
+from ..frame import Frame
+from ..geometry import min_image
+
+
+def synthetic_frames(box=(200.0, 200.0), n_frames=1, dt_s=60.0, disks=(), streams=(), gas=0, gas_speed=4.0,
+                     width=0.5, length=5.0, N=8, seed=0, strain=False, t0_s=0.0, jitter_deg=0.0,
+                     speed_noise=0.0, gas_avoids_disks=False) -> Iterator[Frame]:
+    """Trajectories with known answers (for tests and benchmarks).
+
+    disks: dicts(centre=(x, y), radius=R, omega=rad/min (signed, > 0 counter-clockwise), r_in=1.5, speed=None):
+        cells of outline `length` on concentric rings W apart from r_in to R - W/2 (R: the outer edge of the outermost
+        ring), head to tail, each an exact arc, particle speeds |omega| r, rotating rigidly; with speed=v every ring
+        turns at v / r instead (uniform speed, like a slime-trail aggregate; only the sign of omega is used). Half of
+        the cells have k_e = -1 (chain stored tail first). With strain=True, segment strain energy
+        1e-18 J x (1 - r/R).
+    streams: dicts(origin=(x, y), angle=rad, rows=int, per_row=int, speed=µm/min): straight parallel cells, rows W
+        apart, head to tail, translating.
+    gas: that many straight cells at random places and angles, moving along their headings at gas_speed; with
+        gas_avoids_disks, none starts within R + length of a disk centre (they still cross disks later).
+    jitter_deg, speed_noise: disk cells turned about their centres by a random angle of that SD (fixed per cell) and
+        particle speeds multiplied by (1 + speed_noise x standard normal), drawn anew each frame."""
+    rng = np.random.default_rng(seed)
+    L = np.asarray(box, float)
+    l0 = (length - width) / (N - 1)
+    j = np.arange(N) - 0.5 * (N - 1)
+    parts = []   # (kind, data)
+    for dk in disks:
+        ringr = []
+        r = float(dk.get("r_in", 1.5))
+        while r <= dk["radius"] - 0.5 * width + 1e-9:
+            m = int(2 * math.pi * r // length)
+            if m >= 1 and (N - 1) * l0 < 0.95 * 2 * math.pi * r:
+                ringr.append((r, m))
+            r += width
+        rr, th = [], []
+        for r, m in ringr:
+            th0 = rng.uniform(0, 2 * math.pi)
+            for q in range(m):
+                rr.append(r)
+                th.append(th0 + 2 * math.pi * q / m)
+        rr, th = np.array(rr), np.array(th)
+        ke = np.where(rng.random(len(rr)) < 0.5, 1, -1).astype(np.int8)
+        jit = np.deg2rad(jitter_deg) * rng.standard_normal(len(rr))
+        parts.append(("disk", dk, rr, th, ke, jit))
+    for sd in streams:
+        rows, per = int(sd["rows"]), int(sd["per_row"])
+        u = np.array([math.cos(sd["angle"]), math.sin(sd["angle"])])
+        v = np.array([-u[1], u[0]])
+        a, b = np.meshgrid(np.arange(per), np.arange(rows), indexing="ij")
+        c0 = np.asarray(sd["origin"], float) + (a.ravel() * length)[:, None] * u + (b.ravel() * width)[:, None] * v
+        parts.append(("stream", sd, c0, u))
+    if gas:
+        c0 = rng.uniform(0, 1, (gas, 2)) * L
+        if gas_avoids_disks and disks:
+            for _ in range(1000):
+                bad = np.zeros(gas, bool)
+                for dk in disks:
+                    dd = min_image(c0 - np.asarray(dk["centre"], float), L)
+                    bad |= np.hypot(dd[:, 0], dd[:, 1]) < dk["radius"] + length
+                if not bad.any():
+                    break
+                c0[bad] = rng.uniform(0, 1, (int(bad.sum()), 2)) * L
+        ang = rng.uniform(0, 2 * math.pi, gas)
+        ke = np.where(rng.random(gas) < 0.5, 1, -1).astype(np.int8)
+        parts.append(("gas", None, c0, ang, ke))
+    for f in range(n_frames):
+        t_s = t0_s + f * dt_s
+        tm = t_s / 60.0
+        P_, K_, S_, E_ = [], [], [], []
+        for part in parts:
+            if part[0] == "disk":
+                _, dk, rr, th, ke, jit = part
+                w = float(dk["omega"])
+                sgn = 1.0 if w >= 0 else -1.0
+                # particle 0 of a k_e = +1 cell leads (largest angle in the sense of motion)
+                v_const = dk.get("speed")          # None: rigid rotation; a number: every cell at that speed
+                wr = sgn * v_const / rr if v_const is not None else np.full(len(rr), w)
+                ang = th[:, None] + (wr * tm)[:, None] + sgn * (-j[None, :]) * (l0 / rr[:, None]) * ke[:, None]
+                c = np.asarray(dk["centre"], float)
+                pos = c + rr[:, None, None] * np.stack([np.cos(ang), np.sin(ang)], -1)
+                if jitter_deg:
+                    cc = pos.mean(1, keepdims=True)
+                    co, si = np.cos(jit)[:, None], np.sin(jit)[:, None]
+                    q = pos - cc
+                    pos = cc + np.stack([co * q[..., 0] - si * q[..., 1], si * q[..., 0] + co * q[..., 1]], -1)
+                spd = np.repeat((np.abs(wr) * rr)[:, None], N, 1)
+                if speed_noise:
+                    spd = spd * np.clip(1 + speed_noise * rng.standard_normal(spd.shape), 0, None)
+                P_.append(pos)
+                K_.append(ke)
+                S_.append(spd)
+                E_.append(np.repeat((1e-18 * np.clip(1 - rr / dk["radius"], 0, None))[:, None], N - 1, 1))
+            elif part[0] == "stream":
+                _, sd, c0, u = part
+                c = c0 + sd["speed"] * tm * u
+                pos = c[:, None, :] - (j * l0)[None, :, None] * u     # particle 0 in front
+                P_.append(pos)
+                K_.append(np.ones(len(c), np.int8))
+                S_.append(np.full((len(c), N), float(sd["speed"])))
+                E_.append(np.zeros((len(c), N - 1)))
+            else:
+                _, _, c0, ang, ke = part
+                u = np.stack([np.cos(ang), np.sin(ang)], -1)
+                c = c0 + gas_speed * tm * u
+                pos = c[:, None, :] - (j * l0)[None, :, None] * u[:, None, :] * ke[:, None, None].astype(float)
+                P_.append(pos)
+                K_.append(ke)
+                S_.append(np.full((len(c), N), float(gas_speed)))
+                E_.append(np.zeros((len(c), N - 1)))
+        pos = np.concatenate(P_) if P_ else np.zeros((0, N, 2))
+        pos = pos - np.floor(pos[:, :1] / L) * L
+        yield Frame(time_s=t_s, step=f, box=(float(L[0]), float(L[1])), width_um=width, positions=pos,
+                    engine_direction=np.concatenate(K_).astype(np.int8),
+                    particle_speed=np.concatenate(S_).astype(np.float32),
+                    segment_strain=np.concatenate(E_) if strain else None, meta={"name": "synthetic"})
+
+
+def write_synthetic(path: str, v_b: float = 4.0, **kw) -> str:
+    """Write synthetic_frames(**kw) to a GSD trajectory at path."""
+    from ..trajectory import TrajectoryWriter
+    N = kw.get("N", 8)
+    scene = {"name": "synthetic", "cell": {"particles": N, "width_um": kw.get("width", 0.5),
+                                           "speed_um_per_min": v_b}}
+    with TrajectoryWriter(path, scene) as w:
+        for fr in synthetic_frames(**kw):
+            w.append(fr)
+    return path
