@@ -2,18 +2,23 @@
 
 Convention: every key that carries a unit names it (`k_c_N_per_m`, `f_max_pN`, `dt_ms`). Values in scene files
 are in the paper's units (SI or the paper's µm/min, h, min); `Scene` exposes internal units (µm, s, pN).
-All defaults live in `SCHEMA` below and nowhere else; a scene file states only what its paper caption states.
+All defaults live in `SCHEMA` (taichimyxo/schema.py) and nowhere else; a scene file states only what its paper
+caption states.
 Unknown keys, wrong types and out-of-range values are refused with one line naming the key and what is allowed.
 """
 from __future__ import annotations
 
 import copy
 import json
-import math
 import os
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
+
+# the schema (every key, its default and check) and its errors; re-exported: `from taichimyxo.scene import SCHEMA`
+from .schema import (SCHEMA, STIFFNESS_NAMES, SceneError, defaults, merge, parse_set,  # noqa: F401
+                     to_toml, toml_value)
+from .stability import default_dt_ms
 
 
 def _scenes_dir() -> Path:
@@ -31,196 +36,6 @@ SCENES_DIR = _scenes_dir()
 # The densest random start placed reliably and in bounded time (init.py, "Random sequential placement": above
 # 0.40 the tries per cell climb from hundreds to thousands, and past 0.44 placement stalls).
 RANDOM_MAX_AREA_FRACTION = 0.40
-
-
-class SceneError(ValueError):
-    """Bad scene input; the message is one line meant for the user."""
-
-
-# (section, key) -> (type, default, check, doc). check: "pos" (> 0), "nonneg" (>= 0), a tuple of allowed values,
-# a (lo, hi) range given as ("range", lo, hi), or None.
-_F, _I, _S, _B = float, int, str, bool
-SCHEMA: dict[str, dict[str, tuple]] = {
-    "scene": {
-        "name": (_S, "", None, "short name, e.g. S3"),
-        "title": (_S, "", None, "one line for `list`"),
-        "paper_figure": (_S, "", None, "figure or video of the paper this reproduces"),
-        "caption": (_S, "", None, "what the paper's caption says"),
-    },
-    "domain": {
-        "width_um": (_F, 200.0, "pos", "periodic box width, µm"),
-        "height_um": (_F, 200.0, "pos", "periodic box height, µm"),
-    },
-    "population": {
-        "start": (_S, "random", ("random", "aligned", "spiral"), "initial configuration"),
-        "density_cells_per_cm2": (_F, 5e6, "pos", "cell density (low 5e6, high 4e7)"),
-        "cells": (_I, 0, "nonneg", "number of cells; 0 = density x area"),
-        "polarity": (_S, "random", ("random", "same"), "engine directions at start"),
-    },
-    "cell": {
-        "length_um": (_F, 5.0, "pos", "outline length L including round caps, µm"),
-        "width_um": (_F, 0.5, "pos", "cell width W, µm"),
-        "particles": (_I, 8, ("range", 3, 64), "particles per cell N"),
-        "k_s_N_per_m": (_F, 0.01, "pos", "linear spring stiffness k_s, N/m"),
-        "k_a_N_m": (_F, 1e-17, "pos", "angular spring stiffness k_a, N·m (1e-18 very flexible, 1e-17 flexible, "
-                                      "1e-16 rigid, 1e-15 very rigid)"),
-        "engine_force_pN": (_F, 100.0, "pos", "engine force F_e per cell, pN"),
-        "speed_um_per_min": (_F, 4.0, "pos", "free-cell speed v_b, µm/min (sets the drag)"),
-        "drag_ratio_normal": (_F, 0.5, "pos", "zeta_n / zeta_t [decision, docs/model.md]"),
-    },
-    "collisions": {
-        "k_c_N_per_m": (_F, 0.01, "pos", "collision stiffness k_c, N/m (low density 0.01, high 0.002)"),
-    },
-    "guiding": {
-        "kind": (_S, "none", ("none", "passive", "active", "adhesion"), "short-range head-to-tail guiding"),
-        "f_max_pN": (_F, 200.0, "pos", "maximum guiding force F_max^g, pN"),
-        "range_um": (_F, 0.25, "pos", "guiding range d_g (gap beyond W), µm"),
-        "distance": (_S, "segments", ("segments", "particles"), "head-tail distance: between segments or particles"),
-        "self": (_B, True, None, "a cell may follow its own tail"),
-    },
-    "slime": {
-        "enabled": (_B, False, None, "long-range guiding by slime trails"),
-        "grid_um": (_F, 0.25, "pos", "slime grid element side, µm"),
-        "f_max_pN": (_F, 200.0, "pos", "slime guiding force F_max^s, pN"),
-    },
-    "reversals": {
-        "enabled": (_B, False, None, "cells reverse their engine direction periodically"),
-        "period_min": (_F, 10.0, "pos", "mean reversal period T_R, min"),
-        "period_sd_fraction": (_F, 0.24, "nonneg", "SD of the period as a fraction of T_R"),
-        "min_period_fraction": (_F, 0.1, "pos", "periods are truncated below this fraction of T_R"),
-        "suppression": (_B, False, None, "skip reversals during head-to-tail interactions"),
-    },
-    "run": {
-        "hours": (_F, 6.0, "pos", "simulated time, h"),
-        "dt_ms": (_F, 0.0, "nonneg", "time step, ms; 0 = the integrator's default from the accuracy study"),
-        "integrator": (_S, "explicit", ("explicit", "imex"), "explicit: the paper's overdamped Euler step; "
-                       "imex: springs, bending and contacts linearly implicit, contacts coupled by CG"),
-        "precision": (_S, "mixed", ("f32", "f64", "mixed"), "f32, f64, or mixed (f64 positions, f32 forces)"),
-        "seed": (_I, 1, "nonneg", "random seed"),
-        "mass_pg": (_F, 0.0, "nonneg", "particle mass for the semi-implicit Euler step, pg; 0 = overdamped"),
-        "skin_um": (_F, 0.3, "pos", "neighbour-list skin, µm"),
-        "max_neighbours": (_I, 0, "nonneg", "neighbour-list capacity per segment; 0 = from density"),
-        "speed_window_s": (_F, 1.0, "pos", "window over which displayed speeds are averaged, s"),
-    },
-    "output": {
-        "frame_interval_min": (_F, 1.0, "pos", "simulated minutes between movie frames"),
-        "trajectory_interval_min": (_F, 0.0, "nonneg", "simulated minutes between trajectory frames; "
-                                    "0 = output.frame_interval_min"),
-        "color": (_S, "speed", ("speed", "strain", "identity", "polarity", "orientation"),
-                  "what the movie colours by: segment speed or strain; cell identity, polarity or axis angle"),
-        "color_min": (_F, 0.0, "nonneg", "lower end of the colour scale for speed (µm/min) or strain (J); "
-                      "color_min = color_max = 0: the colouring's default range (0-16 µm/min, 1e-21-1e-17 J)"),
-        "color_max": (_F, 0.0, "nonneg", "upper end of the colour scale for speed (µm/min) or strain (J)"),
-        "video_width": (_I, 1920, ("range", 64, 7680), "movie width, px"),
-        "video_height": (_I, 1080, ("range", 64, 4320), "movie height, px"),
-        "fps": (_F, 10.0, "pos", "movie frames per second"),
-        "strain": (_B, False, None, "log per-segment strain energy in the trajectory"),
-        "movie": (_B, True, None, "write an MP4"),
-    },
-    "preview": {
-        "scale": (_F, 0.25, ("range", 0.01, 1.0), "--preview: box side scaled by this (cells scale with area)"),
-        "hours": (_F, 0.1, "pos", "--preview: simulated time, h"),
-        "frame_interval_min": (_F, 0.25, "pos", "--preview: minutes between frames"),
-    },
-}
-
-# the stiffness names the paper uses
-STIFFNESS_NAMES = {1e-18: "very flexible", 1e-17: "flexible", 1e-16: "rigid", 1e-15: "very rigid"}
-
-
-def defaults() -> dict:
-    return {sec: {k: v[1] for k, v in keys.items()} for sec, keys in SCHEMA.items()}
-
-
-def _check_value(sec: str, key: str, val):
-    typ, _, check, _ = SCHEMA[sec][key]
-    name = f"{sec}.{key}"
-    if typ is _F:
-        if isinstance(val, bool) or not isinstance(val, (int, float)):
-            raise SceneError(f"{name} = {val!r}: expected a number")
-        val = float(val)
-        if not math.isfinite(val):
-            raise SceneError(f"{name} = {val!r}: expected a finite number")
-    elif typ is _I:
-        if isinstance(val, bool) or not (isinstance(val, int) or (isinstance(val, float) and val.is_integer())):
-            raise SceneError(f"{name} = {val!r}: expected an integer")
-        val = int(val)
-    elif typ is _B:
-        if not isinstance(val, bool):
-            raise SceneError(f"{name} = {val!r}: expected true or false")
-    elif typ is _S:
-        if not isinstance(val, str):
-            raise SceneError(f"{name} = {val!r}: expected a string")
-    if check == "pos" and not val > 0:
-        raise SceneError(f"{name} = {val!r}: must be positive")
-    if check == "nonneg" and not val >= 0:
-        raise SceneError(f"{name} = {val!r}: must be zero or positive")
-    if isinstance(check, tuple) and check and check[0] == "range":
-        if not (check[1] <= val <= check[2]):
-            raise SceneError(f"{name} = {val!r}: must be between {check[1]} and {check[2]}")
-    elif isinstance(check, tuple) and val not in check:
-        raise SceneError(f"{name} = {val!r}: allowed values are {', '.join(map(str, check))}")
-    return val
-
-
-def _merge(base: dict, over: dict, where: str) -> None:
-    for sec, body in over.items():
-        if sec not in SCHEMA:
-            raise SceneError(f"{where}: unknown section [{sec}]; allowed: {', '.join(SCHEMA)}")
-        if not isinstance(body, dict):
-            raise SceneError(f"{where}: [{sec}] must be a table")
-        for key, val in body.items():
-            if key not in SCHEMA[sec]:
-                raise SceneError(f"{where}: unknown key {sec}.{key}; allowed in [{sec}]: {', '.join(SCHEMA[sec])}")
-            base[sec][key] = _check_value(sec, key, val)
-
-
-def parse_set(items: list[str]) -> dict:
-    """--set KEY=VALUE (dotted key, TOML value; bare words are taken as strings) -> nested dict."""
-    out: dict = {}
-    for item in items or []:
-        if "=" not in item:
-            raise SceneError(f"--set {item!r}: expected KEY=VALUE, e.g. --set guiding.kind=active")
-        key, raw = item.split("=", 1)
-        key = key.strip()
-        if key.count(".") != 1:
-            raise SceneError(f"--set {key!r}: expected a dotted key SECTION.KEY, e.g. cell.k_a_N_m")
-        sec, k = key.split(".")
-        if sec not in SCHEMA or k not in SCHEMA[sec]:
-            raise SceneError(f"--set {key}: unknown key; see `python -m taichimyxo keys`")
-        try:
-            val = tomllib.loads(f"v = {raw.strip()}")["v"]
-        except tomllib.TOMLDecodeError:
-            val = raw.strip()
-        out.setdefault(sec, {})[k] = val
-    return out
-
-
-def toml_value(v) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, (int, float)):
-        return repr(v)
-    return json.dumps(v, ensure_ascii=False)      # a JSON string is a valid TOML basic string
-
-
-def to_toml(scene: "Scene") -> str:
-    """The resolved scene as a TOML file: every key with its value (defaults included, after --set and --preview),
-    its meaning as a comment. Loading the text back gives the same scene (--preview's scaling already applied)."""
-    lines = [f"# {scene.name}: resolved from {scene.source or 'defaults'}"]
-    if scene.preview_scaled:
-        lines.append("# --preview scaled " + ", ".join(f"{k} (from {v!r})" for k, v in scene.preview_scaled.items()))
-    notes = {("run", "dt_ms"): f"resolves to {scene.dt * 1e3:g} ms",
-             ("output", "trajectory_interval_min"): f"resolves to "
-             f"{scene.trajectory_every_steps * scene.dt / 60:g} min"}
-    for sec, keys in SCHEMA.items():
-        lines += ["", f"[{sec}]"]
-        width = max(len(f"{k} = {toml_value(scene.raw[sec][k])}") for k in keys)
-        for k, (_, _, _, doc) in keys.items():
-            entry = f"{k} = {toml_value(scene.raw[sec][k])}"
-            note = f"{doc}" + (f"; {notes[(sec, k)]}" if (sec, k) in notes and scene.raw[sec][k] == 0 else "")
-            lines.append(f"{entry:<{width}}  # {note}")
-    return "\n".join(lines) + "\n"
 
 
 def available_scenes() -> list[str]:
@@ -272,9 +87,9 @@ class Scene:
         preview.hours, frames every preview.frame_interval_min, a small movie; a value given in `overrides` (--set
         and the command line's options) is the user's and is never rescaled."""
         raw = defaults()
-        _merge(raw, data, where)
+        merge(raw, data, where)
         if overrides:
-            _merge(raw, overrides, "--set")
+            merge(raw, overrides, "--set")
         if not raw["scene"]["name"]:
             raw["scene"]["name"] = default_name or "scene"
         scaled = {}
@@ -302,7 +117,7 @@ class Scene:
 
     def with_overrides(self, overrides: dict) -> "Scene":
         raw = copy.deepcopy(self.raw)
-        _merge(raw, overrides, "override")
+        merge(raw, overrides, "override")
         scaled = {k: v for k, v in self.preview_scaled.items()
                   if k.split(".")[1] not in overrides.get(k.split(".")[0], {})}
         sc = Scene(raw=raw, source=self.source, preview_scaled=scaled)
@@ -466,8 +281,88 @@ class Scene:
         return self.raw["guiding"]["f_max_pN"] / self.raw["guiding"]["range_um"]
 
     @property
+    def title(self) -> str:
+        return self.raw["scene"]["title"]
+
+    @property
+    def paper_figure(self) -> str:
+        return self.raw["scene"]["paper_figure"]
+
+    @property
+    def polarity(self) -> str:
+        return self.raw["population"]["polarity"]
+
+    @property
+    def v_b_um_per_min(self) -> float:
+        """Free-cell speed v_b in the paper's unit, µm/min (what speeds are shown in)."""
+        return self.raw["cell"]["speed_um_per_min"]
+
+    @property
+    def stiffness_label(self) -> str:
+        """k_a and k_c as the scene gives them: "k_a = 1e-17 N·m, k_c = 0.01 N/m"."""
+        return f"k_a = {self.raw['cell']['k_a_N_m']:g} N·m, k_c = {self.raw['collisions']['k_c_N_per_m']:g} N/m"
+
+    @property
+    def movie(self) -> bool:
+        return self.raw["output"]["movie"]
+
+    @property
+    def color(self) -> str:
+        """The movie's colouring (output.color)."""
+        return self.raw["output"]["color"]
+
+    @property
+    def video_size(self) -> tuple[int, int]:
+        return (self.raw["output"]["video_width"], self.raw["output"]["video_height"])
+
+    @property
+    def fps(self) -> float:
+        return self.raw["output"]["fps"]
+
+    @property
+    def guiding_f_max(self) -> float:
+        """Maximum guiding force F_max^g, pN."""
+        return self.raw["guiding"]["f_max_pN"]
+
+    @property
+    def guiding_range(self) -> float:
+        """Guiding range d_g (gap beyond W), µm."""
+        return self.raw["guiding"]["range_um"]
+
+    @property
+    def guiding_by_particles(self) -> bool:
+        """Head-to-tail distance between particles (else between segments)."""
+        return self.raw["guiding"]["distance"] == "particles"
+
+    @property
+    def guiding_self(self) -> bool:
+        return self.raw["guiding"]["self"]
+
+    @property
     def slime(self) -> bool:
         return self.raw["slime"]["enabled"]
+
+    @property
+    def slime_grid(self) -> float:
+        """Slime grid element side, µm."""
+        return self.raw["slime"]["grid_um"]
+
+    @property
+    def slime_f_max(self) -> float:
+        """Slime guiding force F_max^s, pN."""
+        return self.raw["slime"]["f_max_pN"]
+
+    @property
+    def reversal_period_s(self) -> float:      # min -> s
+        return self.raw["reversals"]["period_min"] * 60.0
+
+    @property
+    def reversal_sd_fraction(self) -> float:
+        return self.raw["reversals"]["period_sd_fraction"]
+
+    @property
+    def reversal_min_fraction(self) -> float:
+        return self.raw["reversals"]["min_period_fraction"]
 
     @property
     def reversals(self) -> bool:
@@ -486,12 +381,31 @@ class Scene:
         return self.raw["run"]["precision"]
 
     @property
+    def mass(self) -> float:
+        """Particle mass in pN s^2/µm (1 pg = 1e-15 kg; pN = 1e-12 N; µm/s^2 = 1e-6 m/s^2: x 1e-9); 0: overdamped."""
+        return self.raw["run"]["mass_pg"] * 1e-9
+
+    @property
+    def skin(self) -> float:
+        """Neighbour-list skin, µm."""
+        return self.raw["run"]["skin_um"]
+
+    @property
+    def max_neighbours(self) -> int:
+        """Neighbour-list capacity per segment; 0: from the densest packing."""
+        return self.raw["run"]["max_neighbours"]
+
+    @property
+    def speed_window_s(self) -> float:
+        """Window over which displayed speeds are averaged, s."""
+        return self.raw["run"]["speed_window_s"]
+
+    @property
     def dt(self) -> float:
         """Time step in s; 0 in the file means the integrator's default (see stability.py)."""
         ms = self.raw["run"]["dt_ms"]
         if ms > 0:
             return ms * 1e-3
-        from .stability import default_dt_ms
         return default_dt_ms(self) * 1e-3
 
     @property

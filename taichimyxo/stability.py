@@ -1,25 +1,35 @@
 """Time-step defaults and stability limits per integrator.
 
-The limits in `MEASURED_LIMITS_MS` come from `python -m taichimyxo bench stability` (benchmarks/results/
-stability.csv): the largest step at which the hard test configurations stayed within the invariants. Where no
-measurement covers a scene's stiffnesses, a linear-stability estimate is used: explicit Euler on the overdamped
-system is stable for dt < 2 / lambda_max with lambda_max the stiffest rate among springs (4 k_s / zeta_t), bending
-(16 k_a / (l0^2 zeta_n)) and contacts (4 k_c / zeta_n, a particle touching up to ~4 segments)."""
+The limits come from the package data file stability_limits.json, which a person updates from a stability sweep
+(`python benchmarks/stability_sweep.py` writes its measurement to benchmarks-results/stability_limits.json; the
+committed one is benchmarks/results/stability.csv): the largest step at which the hard test configurations stayed
+within the invariants. Where no measurement covers a scene's stiffnesses, a linear-stability estimate is used:
+explicit Euler on the overdamped system is stable for dt < 2 / lambda_max with lambda_max the stiffest rate among
+springs (4 k_s / zeta_t), bending (16 k_a / (l0^2 zeta_n)) and contacts (4 k_c / zeta_n, a particle touching up to
+~4 segments).
+
+Every function takes the scene (anything with a Scene's attributes); this module imports nothing of scene.py, which
+imports it for the default step."""
 from __future__ import annotations
 
 import json
 from pathlib import Path
 
-from .scene import SceneError
+from .schema import SceneError
 
 _LIMITS_FILE = Path(__file__).with_name("stability_limits.json")
 
 
-def _measured() -> dict:
+def measured_limits() -> dict:
+    """The shipped measurement: {integrator: {"k_a/k_c": limit_ms}, "defaults": {integrator: {"k_a/k_c": dt_ms}}}."""
     try:
         return json.loads(_LIMITS_FILE.read_text())
     except (OSError, ValueError):
         return {}
+
+
+def _stiffness_key(scene) -> str:
+    return f"{scene.raw['cell']['k_a_N_m']:g}/{scene.raw['collisions']['k_c_N_per_m']:g}"
 
 
 def estimate_explicit_limit_ms(scene) -> float:
@@ -30,8 +40,8 @@ def estimate_explicit_limit_ms(scene) -> float:
 
 def stable_limit_ms(scene) -> float:
     """The largest stable step for the scene's integrator and stiffnesses, ms."""
-    table = _measured().get(scene.integrator, {})
-    key = f"{scene.raw['cell']['k_a_N_m']:g}/{scene.raw['collisions']['k_c_N_per_m']:g}"
+    table = measured_limits().get(scene.integrator, {})
+    key = _stiffness_key(scene)
     if table.get(key, 0) > 0:          # 0: the sweep found no stable step on its grid; use the estimate
         return float(table[key])
     est = estimate_explicit_limit_ms(scene)
@@ -39,9 +49,9 @@ def stable_limit_ms(scene) -> float:
 
 
 def default_dt_ms(scene) -> float:
-    d = _measured().get("defaults", {}).get(scene.integrator)
+    d = measured_limits().get("defaults", {}).get(scene.integrator)
     if d:
-        key = f"{scene.raw['cell']['k_a_N_m']:g}/{scene.raw['collisions']['k_c_N_per_m']:g}"
+        key = _stiffness_key(scene)
         if key in d:
             return float(d[key])
     return 1.0 if scene.integrator == "explicit" else min(10.0, 0.5 * stable_limit_ms(scene))
@@ -52,5 +62,4 @@ def check_step(scene, force: bool = False) -> None:
     dt_ms = scene.dt * 1e3
     if dt_ms > lim and not force:
         raise SceneError(f"run.dt_ms = {dt_ms:g} exceeds the stability limit {lim:.3g} ms of the {scene.integrator} "
-                         f"integrator at k_a = {scene.raw['cell']['k_a_N_m']:g} N·m, k_c = "
-                         f"{scene.raw['collisions']['k_c_N_per_m']:g} N/m; use a smaller step or --force")
+                         f"integrator at {scene.stiffness_label}; use a smaller step or --force")

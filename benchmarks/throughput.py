@@ -1,19 +1,20 @@
-"""Benchmarks: `python -m taichimyxo bench throughput|accuracy|stability`.
+"""Throughput: particle-steps per second per scene and size, measured in one run, plus the cost of each effect as a
+ratio to the non-guided scene (S1) on the same start.
 
-throughput: particle-steps per second per scene and size, measured in one run, plus the cost of each effect as a
-ratio to the non-guided scene (S1) on the same start. Writes throughput.csv into the output folder (default
-benchmarks-results/ in the current directory: a benchmark never writes into the source tree or the installed package
-unless told to, with --out or, for the stability limits, --write-limits) and prints a table.
-Rates, never timed asserts: these machines are shared and noisy; ratios within one run are what to compare."""
+    python benchmarks/throughput.py [--quick] [--out DIR]
+
+Writes throughput.csv (throughput_quick.csv with --quick) and a .txt naming the machine into the output folder
+(default benchmarks-results/ in the current directory) and prints a table. Rates, never timed asserts: these
+machines are shared and noisy; ratios within one run are what to compare.
+"""
 from __future__ import annotations
 
-import csv
 import os
 import platform
 import time
 from pathlib import Path
 
-DEFAULT_OUT = "benchmarks-results"     # relative to the current directory
+from benchlib import DEFAULT_OUT, parser, write_csv
 
 # (scene, what it adds over S1)
 SCENES = [
@@ -27,10 +28,10 @@ SCENES = [
 ]
 
 
-def _measure(name: str, scale: float, steps: int, warm: int, precision: str | None = None,
-             integrator: str | None = None) -> dict:
-    from .scene import Scene
-    from .sim import make_simulation
+def measure(name: str, scale: float, n_steps: int, warm: int, precision: str | None = None,
+            integrator: str | None = None) -> dict:
+    from taichimyxo.scene import Scene
+    from taichimyxo.simulation import make_simulation
     over = {"output": {"movie": False}}
     if scale != 1.0:
         sc0 = Scene.load(name)
@@ -47,29 +48,29 @@ def _measure(name: str, scale: float, steps: int, warm: int, precision: str | No
     sim.run(warm)                                   # compiles and settles the neighbour list
     setup = time.perf_counter() - t0
     t0 = time.perf_counter()
-    sim.run(steps)
+    sim.run(n_steps)
     wall = time.perf_counter() - t0
     row = {"scene": name, "scale": scale, "cells": sc.n_cells, "particles": sim.n_p, "precision": sc.precision,
-           "integrator": sc.integrator, "dt_ms": sc.dt * 1e3, "steps": steps, "wall_s": round(wall, 4),
-           "steps_per_s": round(steps / wall, 1), "particle_steps_per_s": round(steps * sim.n_p / wall),
-           "simulated_s_per_wall_s": round(steps * sc.dt / wall, 3), "setup_s": round(setup, 2),
+           "integrator": sc.integrator, "dt_ms": sc.dt * 1e3, "steps": n_steps, "wall_s": round(wall, 4),
+           "steps_per_s": round(n_steps / wall, 1), "particle_steps_per_s": round(n_steps * sim.n_p / wall),
+           "simulated_s_per_wall_s": round(n_steps * sc.dt / wall, 3), "setup_s": round(setup, 2),
            "rebuilds": sim.rebuilds, "serial_loops": sim.serial}
     sim.close()
     return row
 
 
-def throughput(quick: bool = False, out_dir: str = DEFAULT_OUT) -> list[dict]:
-    from . import backend
+def main(quick: bool = False, out_dir: str = DEFAULT_OUT) -> list[dict]:
+    from taichimyxo import backend
     backend.init("cpu")
     rows = []
     sizes = [1.0] if quick else [1.0, 0.5, 0.25]
-    steps = 500 if quick else 2000
+    n_steps = 500 if quick else 2000
     for scale in sizes:
         base = None
         for name, what in SCENES:
             if quick and name not in ("S1", "S3", "S17"):
                 continue
-            r = _measure(name, scale, steps=steps if scale == 1.0 else steps * 4, warm=200)
+            r = measure(name, scale, n_steps if scale == 1.0 else n_steps * 4, warm=200)
             r["adds"] = what
             if name == "S1":
                 base = r["steps_per_s"]
@@ -80,7 +81,7 @@ def throughput(quick: bool = False, out_dir: str = DEFAULT_OUT) -> list[dict]:
                   f"cost vs S1 {r['cost_vs_S1'] or '-':>6}  ({what})", flush=True)
     if not quick:
         for prec in ("f32", "f64"):
-            r = _measure("S1", 1.0, steps=steps, warm=200, precision=prec)
+            r = measure("S1", 1.0, n_steps, warm=200, precision=prec)
             r["adds"] = f"S1 in {prec}"
             r["cost_vs_S1"] = round(rows[0]["steps_per_s"] / r["steps_per_s"], 3)
             rows.append(r)
@@ -89,10 +90,7 @@ def throughput(quick: bool = False, out_dir: str = DEFAULT_OUT) -> list[dict]:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     path = out / ("throughput_quick.csv" if quick else "throughput.csv")
-    with open(path, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0].keys()))
-        w.writeheader()
-        w.writerows(rows)
+    write_csv(path, rows)
     with open(path.with_suffix(".txt"), "w") as f:
         f.write(f"machine: {platform.machine()} {os.cpu_count()} cores, {platform.python_version()}, "
                 f"{time.strftime('%Y-%m-%d %H:%M')}\n")
@@ -100,13 +98,10 @@ def throughput(quick: bool = False, out_dir: str = DEFAULT_OUT) -> list[dict]:
     return rows
 
 
-def main(which: str, quick: bool = False, out_dir: str = DEFAULT_OUT, write_limits: bool = False) -> int:
-    if which == "throughput":
-        throughput(quick, out_dir)
-        return 0
-    from . import bench_accuracy
-    if which == "accuracy":
-        return bench_accuracy.main(quick=quick, out_dir=out_dir)
-    if which == "stability":
-        return bench_accuracy.stability_main(quick=quick, out_dir=out_dir, write_limits=write_limits)
-    raise ValueError(which)
+def build_parser():
+    return parser(__doc__, "S1, S3, S17 at full size only, 500 steps each (a few minutes)")
+
+
+if __name__ == "__main__":
+    a = build_parser().parse_args()
+    main(quick=a.quick, out_dir=a.out)
