@@ -1,5 +1,6 @@
-"""Running a scene: the simulation loop with writers attached (movie, trajectory, summary), a progress line,
-clean interruption (SIGINT/SIGTERM close every file and write a checkpoint), --resume, and a check of the
+"""Running a scene: the writers a scene asks for (taichimyxo.writers: movie, trajectory, summary, checkpoint, the
+invariant check, a progress line), built from the scene and the command line's options and driven by
+taichimyxo.driver.drive; clean interruption (SIGINT/SIGTERM close every file and write a checkpoint), --resume, and a check of the
 numerical invariants at every frame (a run that breaks them stops, keeping what it wrote, and says why).
 
 Outputs in the output folder, for scene NAME:
@@ -15,18 +16,17 @@ Outputs in the output folder, for scene NAME:
 from __future__ import annotations
 
 import json
-import math
 import os
-import signal
 import sys
 import time
 from pathlib import Path
 
-import numpy as np
-
+from .driver import InvariantBroken, drive  # noqa: F401  (InvariantBroken: part of this module's interface)
+from .progress import Progress, duration  # noqa: F401
 from .scene import Scene, SceneError
-
-SUMMARY_VERSION = 1
+from .triggers import Periodic, WallClock
+from .writers import (SUMMARY_VERSION, Checkpoint, FigurePanel, InvariantCheck, Movie, ProgressLine,  # noqa: F401
+                      Summary, Trajectory, check_frame, check_positions, read_checkpoint, scene_render_options)
 
 
 class OutputError(SceneError):
@@ -66,7 +66,7 @@ def find_reusable_trajectory(scene: Scene, out: Path) -> tuple[Path, int] | None
             continue
         if d.get("simulated_seconds", 0) + 1e-9 < scene.hours * 3600 - scene.dt:
             continue
-        if scene.raw["output"]["color"] == "strain" and not d.get("strain_logged"):
+        if scene.color == "strain" and not d.get("strain_logged"):
             continue
         # summaries older than output.trajectory_interval_min wrote a trajectory frame per movie frame
         traj_s = d.get("trajectory_interval_s") or \
@@ -78,89 +78,6 @@ def find_reusable_trajectory(scene: Scene, out: Path) -> tuple[Path, int] | None
         if g.is_file():
             return g, int(round(ratio))
     return None
-
-
-class _Interrupt:
-    """SIGINT/SIGTERM set a flag; the loop finishes its chunk, closes the files and checkpoints."""
-
-    def __init__(self):
-        self.signum = None
-        self._old = {}
-
-    def __enter__(self):
-        for s in (signal.SIGINT, signal.SIGTERM):
-            try:
-                self._old[s] = signal.signal(s, self._handle)
-            except ValueError:      # not the main thread
-                pass
-        return self
-
-    def _handle(self, signum, frame):
-        if self.signum is not None:       # a second Ctrl-C: stop now
-            raise KeyboardInterrupt
-        self.signum = signum
-
-    def __exit__(self, *exc):
-        for s, h in self._old.items():
-            signal.signal(s, h)
-
-
-def duration(seconds: float) -> str:
-    """A time with its units: '1 h 05 min' from an hour on, '6 min 05 s' from a minute on, else '3.6 s'."""
-    if not math.isfinite(seconds):
-        return "?"
-    if seconds >= 3600 - 30:
-        m = int(round(seconds / 60.0))
-        return f"{m // 60} h {m % 60:02d} min"
-    if seconds >= 60 - 0.5:
-        s = int(round(seconds))
-        return f"{s // 60} min {s % 60:02d} s"
-    return f"{seconds:.1f} s"
-
-
-class Progress:
-    """One status line on stderr: simulated time of the total, one rate (steps per second of wall time in this
-    session) and the time left at that rate. On a terminal it is redrawn in place every second; otherwise (a log
-    file, a pipe) it is a plain line when the run starts, every 30 s, and at the end, so a log grows by a short line
-    per half minute instead of by one endless carriage-return line."""
-
-    def __init__(self, name: str, total_steps: int, dt: float, start_step: int, stream=None,
-                 interval_s: float | None = None):
-        self.stream = stream or sys.stderr
-        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
-        self.interval = interval_s if interval_s is not None else (1.0 if self.tty else 30.0)
-        self.name, self.total, self.dt, self.start = name, total_steps, dt, start_step
-        self.t0 = time.perf_counter()
-        self.last = -math.inf
-        self.width = 0
-
-    def line(self, step: int) -> str:
-        el = time.perf_counter() - self.t0
-        done = step - self.start
-        rate = done / el if el > 0 and done > 0 else 0.0
-        left = duration((self.total - step) / rate) if rate > 0 else "?"
-        pct = 100.0 * step / max(self.total, 1)
-        return (f"{self.name}: {duration(step * self.dt)} of {duration(self.total * self.dt)} simulated "
-                f"({pct:.0f} %), {rate:.0f} steps/s, {left} left")
-
-    def update(self, step: int, force: bool = False) -> None:
-        now = time.perf_counter()
-        if not force and now - self.last < self.interval:
-            return
-        self.last = now
-        text = self.line(step)
-        if self.tty:
-            self.stream.write("\r" + text.ljust(self.width))
-            self.width = len(text)
-        else:
-            self.stream.write(text + "\n")
-        self.stream.flush()
-
-    def close(self, step: int) -> None:
-        self.update(step, force=True)
-        if self.tty:
-            self.stream.write("\n")
-            self.stream.flush()
 
 
 def _placement_progress(scene):
@@ -183,56 +100,6 @@ def _placement_progress(scene):
     return report
 
 
-class InvariantBroken(RuntimeError):
-    """The state broke a numerical invariant: the step is too large for the configuration (or the model blew up)."""
-
-
-# Checked at every frame (positions and windowed speeds already copied for the frame, so the check is nearly free).
-# Looser than the tests' bounds (invariants.Bounds: lengths within 20 %) so a healthy long run is never stopped,
-# yet any explicit-Euler blow-up crosses them within a frame or two.
-SEGMENT_LENGTH_TOL = 0.5
-
-
-def check_positions(pos, scene) -> str | None:
-    """The first invariant the positions (n_cells, N, 2) break, as a phrase, or None: all finite, every segment
-    within 1 +- SEGMENT_LENGTH_TOL of l0."""
-    if not np.all(np.isfinite(pos)):
-        return "non-finite positions"
-    from .invariants import segment_lengths
-    ln = segment_lengths(pos) / scene.rest_length
-    lo, hi = float(ln.min(initial=1.0)), float(ln.max(initial=1.0))
-    if lo < 1 - SEGMENT_LENGTH_TOL or hi > 1 + SEGMENT_LENGTH_TOL:
-        return f"segment lengths {lo:.2f}..{hi:.2f} l0 outside 1 +- {SEGMENT_LENGTH_TOL} l0"
-    return None
-
-
-def check_frame(fr, scene, speed_bound_vb: float, check_speed: bool) -> str | None:
-    """check_positions, and every windowed particle speed within the physical bound (speed_bound_vb v_b, from
-    invariants.Bounds.for_scene). check_speed: the frame's speeds were averaged over the full speed window."""
-    broken = check_positions(fr.positions, scene)
-    if broken is not None:
-        return broken
-    if check_speed:
-        v_b = scene.raw["cell"]["speed_um_per_min"]
-        sp = np.asarray(fr.particle_speed, np.float64)
-        top = float(sp.max(initial=0.0)) / v_b if np.all(np.isfinite(sp)) else math.inf
-        if top > speed_bound_vb:
-            return f"particle speed {top:.3g} v_b above the physical bound {speed_bound_vb:.3g} v_b"
-    return None
-
-
-def _previous_sessions(path: Path, scene: Scene) -> dict:
-    """Totals of the earlier sessions of this run (from the summary an interrupted session wrote)."""
-    try:
-        d = json.loads(path.read_text())
-    except (OSError, ValueError):
-        return {}
-    if not isinstance(d, dict) or d.get("fingerprint") != scene.fingerprint() or d.get("completed"):
-        return {}
-    return {"wall_seconds_total": float(d.get("wall_seconds_total", d.get("wall_seconds", 0.0))),
-            "sessions": int(d.get("sessions", 1))}
-
-
 def run_scene(scene: Scene, out_dir: str = "videos", arch: str = "cpu", resume: bool = False,
               progress: bool = True, threads: int | None = None, reuse: bool = True,
               checkpoint_every_s: float = 300.0, stop_after_steps: int | None = None) -> dict:
@@ -243,10 +110,7 @@ def run_scene(scene: Scene, out_dir: str = "videos", arch: str = "cpu", resume: 
     from .resources import check_resources
     check_resources(scene)
     out = check_output_dir(out_dir)
-    name = scene.name
-    files = outputs(out, name)
-    write_movie = scene.raw["output"]["movie"]
-    color = scene.raw["output"]["color"]
+    files = outputs(out, scene.name)
 
     if reuse and not resume:
         found = find_reusable_trajectory(scene, out)
@@ -257,9 +121,10 @@ def run_scene(scene: Scene, out_dir: str = "videos", arch: str = "cpu", resume: 
     if resume:
         if not files["ckpt"].is_file():
             raise SceneError(f"--resume: no checkpoint {files['ckpt']} to resume from")
-        ckpt = dict(np.load(files["ckpt"], allow_pickle=False))
-        if str(ckpt.get("fingerprint")) != scene.fingerprint():
-            raise SceneError(f"--resume: {files['ckpt']} was written for different scene parameters")
+        try:
+            ckpt = read_checkpoint(files["ckpt"], scene)
+        except ValueError as e:
+            raise SceneError(f"--resume: {e}") from None
         done = int(ckpt["step"])
         if done > scene.steps:
             # continuing would mark the run complete at a length it has passed and delete the checkpoint
@@ -269,182 +134,57 @@ def run_scene(scene: Scene, out_dir: str = "videos", arch: str = "cpu", resume: 
 
     # place the cells before Taichi starts: a density the start cannot place is bad input (one line, exit 2), and a
     # resumed run takes its state from the checkpoint instead of placing cells it would throw away
-    if ckpt is not None:
-        positions, engine_direction = ckpt["x"], ckpt["ke"]
-    else:
-        from .init import PlacementError, initial_configuration
-        try:
-            positions, engine_direction = initial_configuration(
-                scene, progress=_placement_progress(scene) if progress else None)
-        except PlacementError as e:
-            raise SceneError(f"population: the {scene.start!r} start cannot place the cells ({e}); lower "
-                             f"population.density_cells_per_cm2 or population.cells, or enlarge the domain"
-                             f"{scene.preview_note()}") from None
-
-    from . import backend
-    used_arch = backend.init(arch, threads, default_fp="f64" if scene.precision == "f64" else None)
-    from .sim import NeighbourOverflow, make_simulation
-    from .trajectory import TrajectoryWriter
-
+    from .start import build_simulation, init_backend, initial_state
+    positions, engine_direction = initial_state(scene, ckpt, progress=_placement_progress(scene) if progress else None)
+    used_arch = init_backend(scene, arch, threads)
     t_setup = time.perf_counter()
-    sim = make_simulation(scene, positions=positions, engine_direction=engine_direction)
-    if ckpt is not None:
-        sim.load_checkpoint(ckpt)
+    sim = build_simulation(scene, positions, engine_direction, ckpt)
     setup_s = time.perf_counter() - t_setup
 
-    total = scene.steps
-    # events: a movie frame every movie_every steps, a trajectory frame every traj_every; the loop stops at every
-    # multiple of their greatest common divisor and writes what falls due there (both, always, at the end)
-    movie_every = scene.frame_every_steps
-    traj_every = scene.trajectory_every_steps
-    every = math.gcd(movie_every, traj_every) if write_movie else traj_every
-    window = max(1, min(every, int(round(scene.raw["run"]["speed_window_s"] / scene.dt))))
-    scene_dict = scene.to_dict()
-    scene_dict["_fingerprint"] = scene.fingerprint()
-    traj = TrajectoryWriter(str(files["gsd"]), scene_dict, mode="a" if ckpt is not None else "w")
-    video = None
-    size = (scene.raw["output"]["video_width"], scene.raw["output"]["video_height"])
-    if write_movie:
-        from .render import VideoWriter
-        video = VideoWriter(str(files["mp4"]), size=size, fps=scene.raw["output"]["fps"], color=color,
-                            title=name, free_speed=scene.raw["cell"]["speed_um_per_min"], **scene.color_range)
-        if ckpt is not None and files["gsd"].is_file():
-            from .trajectory import read_frames
-            if movie_every % traj_every:
-                # a trajectory coarser than the movie lacks some of the frames the movie had before the interruption
-                print(f"taichimyxo: the movie up to {duration(sim.time)} is rebuilt from the trajectory's frames "
-                      f"(every {duration(traj_every * scene.dt)}): the movie frames between them are gone",
-                      file=sys.stderr)
-            for fr in read_frames(str(files["gsd"])):     # the movie so far, re-rendered from the trajectory
-                if fr.step % movie_every == 0:
-                    video.append(fr)
+    attached = scene_writers(scene, files, resumed=ckpt is not None, progress=progress,
+                             checkpoint_every_s=checkpoint_every_s, setup_seconds=setup_s, arch=used_arch)
+    movie = next((w for w in attached if isinstance(w, Movie)), None)
+    if movie is not None and ckpt is not None and files["gsd"].is_file():
+        from .trajectory import read_frames
+        movie_every, traj_every = scene.frame_every_steps, scene.trajectory_every_steps
+        if movie_every % traj_every:
+            # a trajectory coarser than the movie lacks some of the frames the movie had before the interruption
+            print(f"taichimyxo: the movie up to {duration(sim.time)} is rebuilt from the trajectory's frames "
+                  f"(every {duration(traj_every * scene.dt)}): the movie frames between them are gone",
+                  file=sys.stderr)
+        # the movie so far, re-rendered from the trajectory
+        movie.append_frames(fr for fr in read_frames(str(files["gsd"])) if fr.step % movie_every == 0)
 
-    from .invariants import Bounds
-    speed_bound = Bounds.for_scene(scene).speed_factor
-    # speeds are compared with the bound only when averaged over the full speed window (shorter windows, when
-    # frames are closer together than it, carry step-scale jitter the bound does not describe)
-    full_window = window * scene.dt >= scene.raw["run"]["speed_window_s"] - 0.5 * scene.dt
-
-    def emit():
-        fr = sim.frame()
-        fr.meta["scene"] = name
-        broken = check_frame(fr, scene, speed_bound, full_window and fr.step > 0)
-        if broken is not None:
-            raise InvariantBroken(broken)
-        final = fr.step == total
-        if fr.step % traj_every == 0 or final:
-            traj.append(fr)
-        if video is not None and (fr.step % movie_every == 0 or final):
-            video.append(fr)
-        return fr
-
-    wall0 = time.perf_counter()
-    start_step = sim.step_count
-    steps_done_here = 0
-    last_frame = None
-    last_ckpt = time.perf_counter()
-    status = "completed"
-    broken = None
-    bar = None
-    try:
-        with _Interrupt() as intr:
-            # the progress line appears once signals are caught: from then on Ctrl-C always ends in a checkpoint
-            if progress:
-                bar = Progress(name, total, scene.dt, sim.step_count)
-                bar.update(sim.step_count, force=True)
-            if sim.step_count == 0:
-                last_frame = emit()
-            while sim.step_count < total:
-                # advance to the next event: window start, frame, or end. The window opens `window` steps before
-                # each frame; when frames are closer together than the window, it opens at the previous frame, so
-                # the displayed speed is always a displacement over a window that ended at the frame (docs/model.md)
-                nxt_frame = min(total, (sim.step_count // every + 1) * every)
-                win_start = max(nxt_frame - window, (nxt_frame - 1) // every * every)
-                if sim.step_count == win_start:
-                    sim.snapshot_speed()
-                target = win_start if sim.step_count < win_start else nxt_frame
-                chunk = min(target - sim.step_count, 2000)
-                if stop_after_steps is not None:
-                    chunk = min(chunk, max(0, stop_after_steps - steps_done_here))
-                sim.run(chunk)
-                steps_done_here += chunk
-                if sim.step_count == nxt_frame:
-                    last_frame = emit()
-                else:
-                    # between frames too (at most 2000 steps apart): a blow-up is stopped before NaNs reach the
-                    # neighbour list, however far apart the frames are
-                    broken = check_positions(sim.positions(), scene)
-                    if broken is not None:
-                        raise InvariantBroken(broken)
-                if bar is not None:
-                    bar.update(sim.step_count)
-                interrupted = intr.signum is not None or (stop_after_steps is not None and
-                                                          steps_done_here >= stop_after_steps)
-                if interrupted:
-                    status = "interrupted"
-                    break
-                if time.perf_counter() - last_ckpt > checkpoint_every_s:
-                    _write_checkpoint(sim, scene, files["ckpt"])
-                    last_ckpt = time.perf_counter()
-    except (InvariantBroken, NeighbourOverflow) as e:
-        # NeighbourOverflow: more neighbours than the list holds, which a blown-up state produces
-        status = "failed"
-        broken = str(e)
-    finally:
-        if bar is not None:
-            bar.close(sim.step_count)
-        traj.close()
-        if video is not None:
-            video.close()
-    wall = time.perf_counter() - wall0
-    if status in ("interrupted", "failed"):
-        _write_checkpoint(sim, scene, files["ckpt"])
-    else:
-        if files["ckpt"].is_file():
-            files["ckpt"].unlink()
-        if last_frame is None:
-            last_frame = sim.frame()
-        if write_movie:
-            from .render import write_png
-            write_png(last_frame, str(files["png"]), color=color, title=name,   # the panel `render` writes too
-                      free_speed=scene.raw["cell"]["speed_um_per_min"], **scene.color_range)
-    before = _previous_sessions(files["json"], scene) if ckpt is not None else {}
-    summary = {
-        "summary_version": SUMMARY_VERSION,
-        "scene": name, "title": scene.raw["scene"]["title"], "paper_figure": scene.raw["scene"]["paper_figure"],
-        "seed": scene.seed, "fingerprint": scene.fingerprint(), "completed": status == "completed",
-        "status": status, "cells": scene.n_cells, "particles": sim.n_p, "segments": sim.n_s,
-        "box_um": list(scene.box), "dt_s": scene.dt,
-        # totals since the start of the run (over every session, when it was interrupted and resumed)
-        "steps": sim.step_count, "simulated_seconds": sim.time,
-        "wall_seconds_total": before.get("wall_seconds_total", 0.0) + wall,
-        "sessions": before.get("sessions", 0) + 1,
-        # this session (this process) alone: the rate pairs its steps with its wall time
-        "steps_this_session": sim.step_count - start_step,
-        "simulated_seconds_this_session": (sim.step_count - start_step) * scene.dt,
-        "wall_seconds": wall, "setup_seconds": setup_s,
-        "particle_steps_per_second": steps_done_here * sim.n_p / max(wall, 1e-9),
-        "frame_interval_s": movie_every * scene.dt, "trajectory_interval_s": traj_every * scene.dt,
-        "neighbour_rebuilds": sim.rebuilds, "arch": used_arch, "precision": scene.precision,
-        "integrator": scene.integrator, "strain_logged": scene.strain,
-        "files": {k: v.name for k, v in files.items() if k != "ckpt" and (k in ("gsd", "json") or write_movie)},
-        "scene_values": scene.to_dict(),
-    }
-    if status in ("interrupted", "failed"):
-        summary["files"]["checkpoint"] = files["ckpt"].name
-    if broken is not None:
-        summary["invariant_broken"] = broken
-    files["json"].write_text(json.dumps(summary, indent=1))
+    drive(sim, scene.steps - sim.step_count, attached, stop_after_steps=stop_after_steps)
+    summary = next(w for w in attached if isinstance(w, Summary)).summary
     sim.close()
     return summary
 
 
-def _write_checkpoint(sim, scene, path: Path) -> None:
-    st = sim.get_checkpoint()
-    st["fingerprint"] = np.array(scene.fingerprint())
-    tmp = path.with_name(path.name + ".tmp.npz")
-    np.savez(tmp, **st)
-    os.replace(tmp, path)
+def scene_writers(scene: Scene, files: dict, *, resumed: bool = False, progress: bool = True,
+                  checkpoint_every_s: float = 300.0, setup_seconds: float = 0.0, arch: str = "cpu") -> list:
+    """The writers a scene's run attaches (what a user would build): the invariant check at every frame, the
+    progress line, the trajectory (every output.trajectory_interval_min) and the movie (every
+    output.frame_interval_min), both also at the last step, the checkpoint (every checkpoint_every_s of wall
+    clock, on interruption and on a broken invariant), the last-frame panel and the summary."""
+    write_movie = scene.movie
+    look = scene_render_options(scene)
+    attached = [InvariantCheck()]
+    if progress:
+        attached.append(ProgressLine(scene.name, scene.steps))
+    attached.append(Trajectory(files["gsd"], Periodic(steps=scene.trajectory_every_steps), final=True,
+                               append=resumed))
+    if write_movie:
+        size = scene.video_size
+        attached.append(Movie(files["mp4"], Periodic(steps=scene.frame_every_steps), final=True, size=size,
+                              fps=scene.fps, **look))
+    attached.append(Checkpoint(files["ckpt"], WallClock(seconds=checkpoint_every_s)))
+    if write_movie:
+        attached.append(FigurePanel(files["png"], **look))        # the panel `render` writes too
+    listed = {k: v for k, v in files.items() if k != "ckpt" and (k in ("gsd", "json") or write_movie)}
+    attached.append(Summary(files["json"], files=listed, checkpoint=files["ckpt"], resumed=resumed,
+                            setup_seconds=setup_seconds, arch=arch))
+    return attached
 
 
 def render_only(scene: Scene, gsd: Path, out: Path, progress: bool = True, every: int = 1) -> dict:
@@ -452,9 +192,9 @@ def render_only(scene: Scene, gsd: Path, out: Path, progress: bool = True, every
     from .render import render_trajectory
     files = outputs(out, scene.name)
     t0 = time.perf_counter()
-    size = (scene.raw["output"]["video_width"], scene.raw["output"]["video_height"])
-    n = render_trajectory(str(gsd), str(files["mp4"]), color=scene.raw["output"]["color"], size=size,
-                          fps=scene.raw["output"]["fps"], png_path=str(files["png"]), progress=progress, every=every,
+    size = scene.video_size
+    n = render_trajectory(str(gsd), str(files["mp4"]), color=scene.color, size=size,
+                          fps=scene.fps, png_path=str(files["png"]), progress=progress, every=every,
                           title=scene.name)
     summary = {"summary_version": SUMMARY_VERSION, "scene": scene.name, "seed": scene.seed,
                "fingerprint": scene.fingerprint(), "completed": True, "status": "rendered from trajectory",

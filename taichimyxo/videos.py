@@ -42,7 +42,7 @@ def regenerate(preview: bool = False, only: str | None = None, out_dir: str = "v
         if unknown or not names:
             raise SceneError(f"--only: unknown scene {', '.join(unknown) or repr(only)}; available: "
                              f"{', '.join(known)}")
-    from .run import check_output_dir
+    from .scene_run import check_output_dir
     out = check_output_dir(out_dir)
     scenes = [(n, Scene.load(n, {}, preview=preview)) for n in names]      # validate all before running any
     todo = [(n, sc) for n, sc in scenes if not _up_to_date(sc, out)]
@@ -55,7 +55,7 @@ def regenerate(preview: bool = False, only: str | None = None, out_dir: str = "v
             cmd.append("--preview")
         if (out / f"{sc.name}.ckpt.npz").is_file():
             cmd.append("--resume")
-        print(f"[{i}/{len(todo)}] {sc.name}: {sc.raw['scene']['title']} "
+        print(f"[{i}/{len(todo)}] {sc.name}: {sc.title} "
               f"(elapsed {time.time() - t0:.0f} s)", flush=True)
         try:
             rc = subprocess.call(cmd)

@@ -1,0 +1,134 @@
+"""The Python API for notebooks and scripts; every command of the command line is a thin layer over it.
+
+    import taichimyxo as tm
+    scene = tm.load_scene("S3", set={"domain.width_um": 30, "domain.height_um": 30}, seed=2)
+    sim = tm.Simulation(scene)                                   # the scene's integrator, cells placed
+    traj = tm.writers.Trajectory("out/S3.gsd", trigger=tm.Periodic(minutes=1))
+    tm.run(sim, minutes=3, writers=[traj])                       # simulated time, writers attached
+    frame = sim.frame()                                          # a Frame: numpy arrays
+    image = tm.render_frame(frame, color="speed")                # an RGB image, (h, w, 3) uint8
+
+- :func:`load_scene`: a scene by name (as ``list`` shows it) or path, with keys overridden by their dotted names.
+- :func:`Simulation`: the simulation of the scene's integrator, cells placed by the scene's start (or taken from
+  a checkpoint), Taichi initialised for the scene's precision.
+- :func:`run`: advance by simulated time (or steps) with writers attached (taichimyxo.writers, triggers in
+  taichimyxo.triggers); returns the :class:`taichimyxo.driver.Run` (status, steps, wall time).
+- :func:`render_frame`: one Frame to an image; :func:`render_movie`: a trajectory to a movie and a panel.
+- :func:`analyze`: what ``python -m taichimyxo analyze`` does (taichimyxo.analysis).
+- :func:`run_scene`: what ``python -m taichimyxo scene`` does (every output, --resume, the summary).
+"""
+from __future__ import annotations
+
+import os
+
+from .scene import SCHEMA, Scene, SceneError
+from .start import build_simulation, init_backend, initial_state  # noqa: F401  (the steps of Simulation)
+
+
+class RenderOptionError(ValueError):
+    """A colouring option render cannot use (a range for a colouring without one, vmin above vmax, ...)."""
+
+
+def load_scene(name_or_path, set: dict | None = None, *, seed: int | None = None, hours: float | None = None,
+               preview: bool = False, force: bool = False) -> Scene:
+    """The scene `name_or_path` (a name like "S3", or a TOML file), validated.
+
+    set: values by dotted key, {"domain.width_um": 30, "guiding.kind": "active"} (or nested, {"domain": {...}});
+    seed, hours: run.seed, run.hours. preview: the small, short version (values given here are never scaled).
+    A time step above the integrator's stability limit is refused (SceneError) unless force=True."""
+    over: dict = {}
+    for key, val in (set or {}).items():
+        if isinstance(val, dict):
+            over.setdefault(key, {}).update(val)
+            continue
+        sec, _, k = str(key).partition(".")
+        if sec not in SCHEMA or k not in SCHEMA[sec]:
+            raise SceneError(f"set {key!r}: unknown key; see `python -m taichimyxo keys`")
+        over.setdefault(sec, {})[k] = val
+    if seed is not None:
+        over.setdefault("run", {})["seed"] = seed
+    scene = Scene.load(os.fspath(name_or_path), over, preview=preview)
+    if hours is not None:           # after --preview, which would cap it
+        scene = scene.with_overrides({"run": {"hours": hours}})
+    from .stability import check_step
+    check_step(scene, force=force)
+    return scene
+
+
+def Simulation(scene: Scene, *, arch: str = "cpu", threads: int | None = None, checkpoint=None, positions=None,
+               engine_direction=None):
+    """The simulation of `scene` with its integrator (taichimyxo.simulation.make_simulation), cells placed by the
+    scene's start, or at `positions` (n_cells, N, 2) µm with `engine_direction` (n_cells,) ±1, or at the state of
+    `checkpoint` (a path written by writers.Checkpoint, or its dict; refused when written for another scene).
+    Initialises Taichi (arch, threads: default all cores, or TAICHIMYXO_THREADS) unless it already is so."""
+    if checkpoint is not None and not isinstance(checkpoint, dict):
+        from .writers import read_checkpoint
+        checkpoint = read_checkpoint(checkpoint, scene)
+    positions, engine_direction = initial_state(scene, checkpoint, positions, engine_direction)
+    init_backend(scene, arch, threads)
+    return build_simulation(scene, positions, engine_direction, checkpoint)
+
+
+def run(sim, *, seconds=None, minutes=None, hours=None, steps=None, writers=(), progress: bool = False, **options):
+    """Advance `sim` by simulated time (seconds, minutes or hours, on the scene's step grid) or by `steps`, with
+    `writers` attached (taichimyxo.writers). progress: show the progress line. options: taichimyxo.driver.drive's
+    (catch_signals, close, chunk_steps, speed_window_s). Returns the Run (status "completed", or "interrupted"
+    after Ctrl-C, or "failed" with Run.broken naming a broken invariant)."""
+    from .driver import drive, steps_for
+    n = steps_for(sim, seconds, minutes, hours, steps)
+    attached = list(writers)
+    if progress:
+        from .writers import ProgressLine
+        attached.insert(0, ProgressLine(sim.scene.name, sim.step_count + n))
+    return drive(sim, n, attached, **options)
+
+
+def render_frame(frame, color: str = "speed", size=(1920, 1080), **options):
+    """One Frame as an RGB image, (h, w, 3) uint8 (taichimyxo.render.render_frame: legend, time, scale bar;
+    options: fit, vmin, vmax, background, decorations, title, ...)."""
+    from .render import render_frame as render
+    return render(frame, size=size, color=color, **options)
+
+
+def render_movie(trajectory, out=None, *, color: str = "speed", size=(1920, 1080), fps: float = 10.0,
+                 every: int = 1, vmin=None, vmax=None, progress: bool = True) -> tuple[str, str, int]:
+    """A GSD trajectory to an MP4 movie with a PNG panel of its last frame beside it, without simulating.
+    out: default next to the trajectory, named after the colouring (S3.mp4 for speed, S3.strain.mp4, ...).
+    Returns (movie, panel, frames). A file that is not a trajectory of cells, or color="strain" without logged
+    strain, is a TrajectoryError; a bad colour range a RenderOptionError; both before anything is written."""
+    from .trajectory import check_trajectory
+    trajectory = os.fspath(trajectory)
+    need = {}
+    if color == "strain":
+        need["log/bonds/strain_energy_J"] = ("--color strain needs the strain energy logged: use another --color, "
+                                             "or rerun the scene with --set output.strain=true")
+    check_trajectory(trajectory, need)
+    from .render import make_scale, render_trajectory
+    try:
+        make_scale(color, vmin=vmin, vmax=vmax)
+    except ValueError as e:
+        raise RenderOptionError(str(e)) from None
+    suffix = "" if color == "speed" else f".{color}"     # each colouring its own file
+    out = os.fspath(out) if out else os.path.splitext(trajectory)[0] + suffix + ".mp4"
+    from .scene_run import check_output_dir
+    check_output_dir(os.path.dirname(os.path.abspath(out)))
+    png = os.path.splitext(out)[0] + ".png"
+    n = render_trajectory(trajectory, out, color=color, size=size, fps=fps, every=every, png_path=png, vmin=vmin,
+                          vmax=vmax, progress=progress)
+    return out, png, n
+
+
+def analyze(trajectory, out_dir=None, *, every: int = 1, v_b: float | None = None, plots: bool = True) -> dict:
+    """Aggregates, rotation and speed profiles of a GSD trajectory (what ``python -m taichimyxo analyze`` does):
+    the summary dict, also written as JSON (and PNG plots) next to the trajectory or into out_dir. A file that is
+    not a trajectory of cells is a TrajectoryError before anything is written."""
+    from .trajectory import check_trajectory
+    check_trajectory(os.fspath(trajectory))
+    from .analysis import analyze as analyze_trajectory
+    return analyze_trajectory(os.fspath(trajectory), out_dir=out_dir, every=every, v_b=v_b, plots=plots)
+
+
+def run_scene(scene: Scene, out_dir: str = "videos", **options) -> dict:
+    """Everything ``python -m taichimyxo scene`` writes (taichimyxo.scene_run.run_scene); returns the summary."""
+    from .scene_run import run_scene as run_all
+    return run_all(scene, out_dir=out_dir, **options)

@@ -1,0 +1,238 @@
+"""The run loop: advance a simulation with writers attached (taichimyxo.writers), in the way HOOMD-blue's
+``Simulation.run`` calls the writers whose triggers fire.
+
+:func:`drive` advances the simulation in chunks (at most ``chunk_steps`` steps) to the next event and
+
+- at every step a writer's step trigger fires (:class:`taichimyxo.triggers.Periodic`), and at the last step for
+  writers with ``final=True``, makes one Frame and hands it to those writers, and to the writers with no trigger
+  (the invariant check), which see every frame;
+- opens the speed window before each frame: the displayed speed is a displacement over the scene's
+  ``run.speed_window_s`` ending at the frame, or, when frames are closer together than that, over the time since
+  the previous frame (docs/model.md). The window is fixed by the schedule alone (not by where a run started), so a
+  resumed run measures the same speeds as an uninterrupted one;
+- after every chunk calls each writer's ``after_chunk`` (progress line, invariants between frames) and asks the
+  other triggers (:class:`taichimyxo.triggers.WallClock`: checkpoints) whether they fire;
+- stops cleanly on SIGINT/SIGTERM (``catch_signals``: the chunk finishes, status "interrupted") and on a broken
+  invariant or a neighbour-list overflow (status "failed", ``Run.broken`` says why);
+- closes every writer (any status), then calls each writer's ``finish`` (what depends on how the run ended: the
+  checkpoint, the last-frame panel, the summary).
+"""
+from __future__ import annotations
+
+import signal
+import time
+import weakref
+
+from .triggers import is_step_trigger
+
+
+class InvariantBroken(RuntimeError):
+    """The state broke a numerical invariant: the step is too large for the configuration (or the model blew up)."""
+
+
+class Interrupt:
+    """SIGINT/SIGTERM set a flag; the loop finishes its chunk, closes the files and checkpoints."""
+
+    def __init__(self):
+        self.signum = None
+        self._old = {}
+
+    def __enter__(self):
+        for s in (signal.SIGINT, signal.SIGTERM):
+            try:
+                self._old[s] = signal.signal(s, self._handle)
+            except ValueError:      # not the main thread
+                pass
+        return self
+
+    def _handle(self, signum, frame):
+        if self.signum is not None:       # a second Ctrl-C: stop now
+            raise KeyboardInterrupt
+        self.signum = signum
+
+    def __exit__(self, *exc):
+        for s, h in self._old.items():
+            signal.signal(s, h)
+
+
+class Run:
+    """One call of :func:`drive`: the simulation, its writers and how the run went. Writers read it.
+
+    status: "running", then "completed", "interrupted" or "failed" (broken: why). frame: the Frame of the current
+    step (made once per step, on first use). full_window: the current frame's speeds were averaged over the full
+    speed window. last_frame: the last frame handed to writers. wall_seconds: from the start until every writer
+    was closed. steps_done: steps advanced in this call."""
+
+    def __init__(self, sim, writers, end_step: int):
+        self.sim, self.writers = sim, writers
+        self.start_step, self.end_step = sim.step_count, end_step
+        self.status, self.broken = "running", None
+        self.steps_done, self.wall_seconds = 0, 0.0
+        self.full_window = False
+        self.last_frame = None
+        self._frame = None
+
+    @property
+    def step(self) -> int:
+        return self.sim.step_count
+
+    @property
+    def completed(self) -> bool:
+        return self.status == "completed"
+
+    @property
+    def frame(self):
+        if self._frame is None or self._frame.step != self.sim.step_count:
+            fr = self.sim.frame()
+            fr.meta.setdefault("scene", self.sim.scene.name)
+            self._frame = fr
+        return self._frame
+
+
+def steps_for(sim, seconds=None, minutes=None, hours=None, steps=None) -> int:
+    """Steps of the scene's time step in the given simulated time (rounded to whole steps), or `steps`."""
+    given = [v is not None for v in (seconds, minutes, hours, steps)]
+    if sum(given) != 1:
+        raise ValueError("give exactly one of seconds=, minutes=, hours=, steps=")
+    if steps is not None:
+        return int(steps)
+    t = seconds if seconds is not None else (minutes * 60.0 if minutes is not None else hours * 3600.0)
+    return int(round(t / sim.scene.dt))
+
+
+# the step at which the driver last opened a speed window, per simulation: a later drive that starts inside the
+# next frame's window knows whether that window is open (continuing a run in a notebook) or was restored from a
+# checkpoint (--resume: the simulation is new, with no entry)
+_window_opened = weakref.WeakKeyDictionary()
+
+
+def drive(sim, n_steps: int, writers=(), *, chunk_steps: int = 2000, speed_window_s: float | None = None,
+          catch_signals: bool = True, stop_after_steps: int | None = None, close: bool = True) -> Run:
+    """Advance `sim` by `n_steps` steps of the scene's time step with `writers` attached; returns the :class:`Run`.
+
+    speed_window_s: the displayed speed's window (default: the scene's run.speed_window_s). catch_signals: SIGINT
+    and SIGTERM end the run after the current chunk (status "interrupted") instead of raising KeyboardInterrupt.
+    stop_after_steps (tests): behave as if interrupted after that many steps. close: close the writers at the end
+    (False keeps them open for a next call; ``finish`` is called either way)."""
+    from .neighbours import NeighbourOverflow
+
+    dt = sim.scene.dt
+    writers = sorted(writers, key=lambda w: getattr(w, "order", 0))      # the invariant check first, summary last
+    for w in writers:
+        if w.trigger is not None:
+            w.trigger.bind(dt)
+    stepped = [w for w in writers if is_step_trigger(w.trigger)]
+    polled = [w for w in writers if w.trigger is not None and not is_step_trigger(w.trigger)]
+    riders = [w for w in writers if w.trigger is None]
+    finals = [w for w in writers if getattr(w, "final", False)]
+    if speed_window_s is None:
+        speed_window_s = sim.scene.speed_window_s
+    window = max(1, int(round(speed_window_s / dt)))
+    run = Run(sim, writers, sim.step_count + int(n_steps))
+    end = run.end_step
+
+    def next_event(step):
+        cands = [w.trigger.next_after(step) for w in stepped]
+        if finals and step < end:
+            cands.append(end)
+        return min(cands) if cands else None
+
+    def window_start(F):
+        prev = max([w.trigger.prev_before(F) for w in stepped], default=run.start_step)
+        return max(F - window, prev)
+
+    def event(F):
+        due = [w for w in writers if (w in stepped and w.trigger(F)) or (w in finals and F == end) or w in riders]
+        if not any(w not in riders for w in due):
+            return
+        ws = max(window_start(F), forced[0]) if F > 0 else F
+        run.full_window = F > 0 and (F - ws) * dt >= speed_window_s - 0.5 * dt
+        for w in due:
+            w.write(run)
+        run.last_frame = run.frame
+
+    def open_window(step):
+        sim.snapshot_speed()
+        try:
+            _window_opened[sim] = step
+        except TypeError:
+            pass
+
+    forced = [-1]                     # where this call opened a window the schedule did not
+    wall0 = time.perf_counter()
+    try:
+        with (Interrupt() if catch_signals else _NoInterrupt()) as intr:
+            for w in writers:
+                w.start(run)          # the progress line appears once signals are caught
+            if sim.step_count == 0:
+                event(0)
+            F = next_event(sim.step_count)
+            if F is not None and window_start(F) < sim.step_count < F and \
+                    _opened_at(sim, window_start(F)) != window_start(F):
+                open_window(sim.step_count)   # a window this simulation did not open for the coming frame
+                forced[0] = sim.step_count
+            while sim.step_count < end:
+                step = sim.step_count
+                F = next_event(step)
+                target = end
+                if F is not None:
+                    ws = window_start(F)
+                    if step == ws:
+                        open_window(step)
+                    target = min(end, ws if step < ws else F)
+                n = min(target - step, chunk_steps)
+                if stop_after_steps is not None:
+                    n = min(n, max(0, stop_after_steps - run.steps_done))
+                sim.run(n)
+                run.steps_done += n
+                if sim.step_count == F:
+                    event(F)
+                for w in writers:
+                    w.after_chunk(run)
+                if intr.signum is not None or (stop_after_steps is not None and run.steps_done >= stop_after_steps):
+                    run.status = "interrupted"
+                    break
+                for w in polled:
+                    if w.trigger(sim.step_count):
+                        w.write(run)
+            else:
+                run.status = "completed"
+    except (InvariantBroken, NeighbourOverflow) as e:
+        # NeighbourOverflow: more neighbours than the list holds, which a blown-up state produces
+        run.status, run.broken = "failed", str(e)
+    finally:
+        if close:
+            close_writers(writers)
+    run.wall_seconds = time.perf_counter() - wall0
+    for w in writers:
+        w.finish(run)
+    return run
+
+
+def _opened_at(sim, default):
+    try:
+        return _window_opened.get(sim, default)
+    except TypeError:           # not weakly referable: no record
+        return default
+
+
+class _NoInterrupt:
+    signum = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        pass
+
+
+def close_writers(writers) -> None:
+    """Close every writer, even when one of them fails to close (the first error is raised after)."""
+    err = None
+    for w in writers:
+        try:
+            w.close()
+        except BaseException as e:      # noqa: BLE001 - re-raised below, after the others are closed
+            err = err or e
+    if err is not None:
+        raise err
