@@ -1,4 +1,4 @@
-"""Command line: python -m taichimyxo {list, keys, scene, render, analyze, videos, bench}.
+"""Command line: python -m taichimyxo {list, keys, scene, render, analyze, videos}.
 
 Bad input is one line on stderr naming the problem and a non-zero exit (2), before any simulation starts.
 Exit status: 0 done, 2 bad input, 3 a run stopped because its state broke a numerical invariant, 130 interrupted."""
@@ -28,8 +28,6 @@ class _Parser(argparse.ArgumentParser):
 
 
 ARCHES = ("cpu", "cuda", "vulkan", "metal", "gpu")       # as backend.init accepts them
-# benchmarks write here, relative to the current directory, never into the source tree or the installed package
-BENCH_OUT = "benchmarks-results"
 
 
 def _positive_int(text: str) -> int:
@@ -100,25 +98,17 @@ def _build_parser() -> argparse.ArgumentParser:
     r.add_argument("--every", type=int, default=1, help="render every K-th frame")
 
     a = sub.add_parser("analyze", help="aggregates, rotation and speed profiles from a trajectory")
-    a.add_argument("trajectory")
+    a.add_argument("trajectory", help="GSD trajectory written by taichimyxo")
     a.add_argument("--out", help="output folder (default: next to the trajectory)")
-    a.add_argument("--every", type=int, default=1)
+    a.add_argument("--every", type=int, default=1, help="analyse every K-th frame")
+    a.add_argument("--v-b", type=float, default=None, help="free-cell speed, µm/min (default: from the scene, or 4)")
+    a.add_argument("--no-plots", action="store_true", help="write the JSON summary only")
 
     v = sub.add_parser("videos", help="regenerate the supplementary videos S1-S17")
     v.add_argument("--preview", action="store_true")
     v.add_argument("--only", help="comma-separated scene names as `list` shows them, e.g. S3,S8,S2FigA")
     v.add_argument("--out", default="videos")
     v.add_argument("--arch", default="cpu", choices=ARCHES)
-
-    b = sub.add_parser("bench", help="benchmarks: throughput, accuracy, stability")
-    b.add_argument("which", choices=["throughput", "accuracy", "stability"])
-    b.add_argument("--quick", action="store_true", help="a reduced version (minutes)")
-    b.add_argument("--out", default=BENCH_OUT,
-                   help=f"folder for the results (default {BENCH_OUT}/ in the current directory)")
-    b.add_argument("--write-limits", action="store_true",
-                   help="stability: also write the measured limits into the package's stability_limits.json, which "
-                        "sets every scene's step limit and default (off by default: a benchmark never changes the "
-                        "installed program unless asked)")
     return p
 
 
@@ -161,8 +151,8 @@ def cmd_list() -> int:
     for name in available_scenes():
         try:
             sc = Scene.load(name)
-            fig = f" [{sc.raw['scene']['paper_figure']}]" if sc.raw["scene"]["paper_figure"] else ""
-            print(f"{name:<12} {sc.raw['scene']['title']}{fig}")
+            fig = f" [{sc.paper_figure}]" if sc.paper_figure else ""
+            print(f"{name:<12} {sc.title}{fig}")
         except SceneError as e:
             print(f"{name:<12} (invalid: {e})")
     return 0
@@ -187,7 +177,8 @@ def cmd_scene(args) -> int:
     if args.show:
         print(to_toml(sc), end="")
         return 0
-    from .run import duration, run_scene
+    from .api import run_scene
+    from .progress import duration
     summary = run_scene(sc, out_dir=args.out, arch=args.arch, resume=args.resume, progress=not args.quiet,
                         threads=args.threads)
     if summary.get("status") == "interrupted":
@@ -206,7 +197,7 @@ def cmd_scene(args) -> int:
 
 def _print_summary(summary: dict, out: str) -> None:
     if "particle_steps_per_second" in summary:
-        from .run import duration
+        from .progress import duration
         # this session's steps with this session's wall time (after --resume, the totals follow, labelled)
         steps = summary.get("steps_this_session", summary["steps"])
         line = (f"{summary['scene']}: {summary['cells']} cells, {steps} steps "
@@ -224,48 +215,30 @@ def _print_summary(summary: dict, out: str) -> None:
 
 
 def cmd_render(args) -> int:
-    # a file render cannot use, or --color strain without logged strain: one line before any frame is written
-    from .trajectory import check_trajectory
-    need = {}
-    if args.color == "strain":
-        need["log/bonds/strain_energy_J"] = ("--color strain needs the strain energy logged: use another --color, "
-                                             "or rerun the scene with --set output.strain=true")
-    check_trajectory(args.trajectory, need)
-    from .render import make_scale, render_trajectory
+    # a file render cannot use, --color strain without logged strain or a bad colour range: one line before any
+    # frame is written
+    from .api import RenderOptionError, render_movie
     try:
-        make_scale(args.color, vmin=args.vmin, vmax=args.vmax)
-    except ValueError as e:
+        out, png, n = render_movie(args.trajectory, args.out, color=args.color, size=_size(args.size), fps=args.fps,
+                                   every=args.every, vmin=args.vmin, vmax=args.vmax)
+    except RenderOptionError as e:
         return _fail(f"render: {e}")
-    suffix = "" if args.color == "speed" else f".{args.color}"     # each colouring its own file
-    out = args.out or os.path.splitext(args.trajectory)[0] + suffix + ".mp4"
-    from .run import check_output_dir
-    check_output_dir(os.path.dirname(os.path.abspath(out)))
-    png = os.path.splitext(out)[0] + ".png"
-    n = render_trajectory(args.trajectory, out, color=args.color, size=_size(args.size), fps=args.fps,
-                          every=args.every, png_path=png, vmin=args.vmin, vmax=args.vmax)
     print(f"{out}: {n} frames; last frame {png}")
     return 0
 
 
 def cmd_analyze(args) -> int:
-    from .trajectory import check_trajectory
-    check_trajectory(args.trajectory)
-    from .analysis import analyze, format_summary
-    summary = analyze(args.trajectory, out_dir=args.out, every=args.every)
+    from .analysis import format_summary
+    from .api import analyze
+    summary = analyze(args.trajectory, out_dir=args.out, every=args.every, v_b=args.v_b, plots=not args.no_plots)
     print(format_summary(summary))
+    print(f"wrote {summary['json']}" + "".join(f"\nwrote {p}" for p in summary["plots"]))
     return 0
 
 
 def cmd_videos(args) -> int:
     from .videos import regenerate
     return regenerate(preview=args.preview, only=args.only, out_dir=args.out, arch=args.arch)
-
-
-def cmd_bench(args) -> int:
-    from . import bench
-    if args.write_limits and args.which != "stability":
-        return _fail("--write-limits applies to `bench stability` only")
-    return bench.main(args.which, quick=args.quick, out_dir=args.out, write_limits=args.write_limits)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -283,8 +256,6 @@ def main(argv: list[str] | None = None) -> int:
             return cmd_analyze(args)
         if args.cmd == "videos":
             return cmd_videos(args)
-        if args.cmd == "bench":
-            return cmd_bench(args)
     except (SceneError, TrajectoryError) as e:
         return _fail(str(e))
     except KeyboardInterrupt:

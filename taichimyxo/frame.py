@@ -9,6 +9,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .geometry import min_image
+
 
 @dataclass
 class Frame:
@@ -55,7 +57,6 @@ def unwrap_chains(pos: np.ndarray, box) -> np.ndarray:
     L = np.asarray(box, dtype=np.float64)
     p = np.asarray(pos, dtype=np.float64).copy()
     p[:, 0] = np.mod(p[:, 0], L)
-    d = np.diff(np.asarray(pos, dtype=np.float64), axis=1)
-    d -= L * np.round(d / L)
+    d = min_image(np.diff(np.asarray(pos, dtype=np.float64), axis=1), L)
     p[:, 1:] = p[:, :1] + np.cumsum(d, axis=1)
     return p

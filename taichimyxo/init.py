@@ -23,7 +23,7 @@ def straight_cell(centre, angle, N, l0):
 
 
 def _polarities(scene, n):
-    if scene.raw["population"]["polarity"] == "same":
+    if scene.polarity == "same":
         return np.ones(n, np.int8)
     u = rng.uniform(scene.seed, rng.STREAM_POLARITY, np.arange(n))
     return np.where(u < 0.5, 1, -1).astype(np.int8)

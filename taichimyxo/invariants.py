@@ -13,7 +13,7 @@ A state is healthy when
     An explicit-Euler instability grows geometrically and breaks the length and distance bounds as well;
   - no two segments of different cells come closer than 0.3 W, nor two non-adjacent segments of one cell
     (segments k and k + 2 included: a hairpin folded on the node of k + 1 is pushed apart by the node contacts of
-    nodes k and k + 3, see sim.py `_node_contact` and tests/test_stability.py).
+    nodes k and k + 3, see terms/contacts.py and tests/test_stability.py).
     Why 0.3 W: the contact force at that depth is k_c * 0.7 W = 700 pN at the high-density k_c = 0.002 N/m and
     3500 pN at 0.01 N/m, i.e. 7 to 35 cells' full engine force pressing on one contact. Nothing in a small or
     moderately dense population pushes that hard, so a deeper overlap means the step let segments pass through
@@ -32,7 +32,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .geometry import closest_points, contact_energy
+from .geometry import closest_points, contact_energy, min_image
+from .terms.bending import bend_angles, energy as bend_energy  # noqa: F401  (bend_angles: API)
+from .terms.springs import energy as spring_energy
 
 
 @dataclass(frozen=True)
@@ -51,9 +53,9 @@ class Bounds:
         has (guiding F_max^g, slime F_max^s) over the normal drag (see the module docstring)."""
         pull = 0.0
         if scene.guiding != "none":
-            pull = max(pull, scene.raw["guiding"]["f_max_pN"])
+            pull = max(pull, scene.guiding_f_max)
         if scene.slime:
-            pull = max(pull, scene.raw["slime"]["f_max_pN"])
+            pull = max(pull, scene.slime_f_max)
         base = kw.pop("speed_factor", cls.speed_factor)
         return cls(speed_factor=base + pull / (scene.zeta_n * scene.v_b), **kw)
 
@@ -61,13 +63,6 @@ class Bounds:
 def segment_lengths(pos: np.ndarray) -> np.ndarray:
     """(n_cells, N-1) lengths of chains given unwrapped (n_cells, N, 2)."""
     return np.linalg.norm(np.diff(pos, axis=1), axis=-1)
-
-
-def bend_angles(pos: np.ndarray) -> np.ndarray:
-    """(n_cells, N-2) signed angle between consecutive segments."""
-    d = np.diff(pos, axis=1)
-    a, b = d[:, :-1], d[:, 1:]
-    return np.arctan2(a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0], (a * b).sum(-1))
 
 
 def segment_pairs(pos: np.ndarray, box, W: float, self_min_sep: int = 3):
@@ -119,14 +114,13 @@ def measure(pos: np.ndarray, box, l0: float, W: float, k_s: float, k_a: float, k
                    e_contact=nan)
         return out
     ln = segment_lengths(pos)
-    th = bend_angles(pos)
     d_other, d_self = segment_pairs(pos, box, W, self_min_sep)
     out["len_min"] = float(ln.min() / l0)
     out["len_max"] = float(ln.max() / l0)
     out["d_other_min"] = float(d_other.min() / W) if d_other.size else math.inf
     out["d_self_min"] = float(d_self.min() / W) if d_self.size else math.inf
-    out["e_spring"] = float(0.5 * k_s * ((ln - l0) ** 2).sum())
-    out["e_bend"] = float(0.5 * k_a * (th ** 2).sum())
+    out["e_spring"] = float(spring_energy(pos, k_s, l0))
+    out["e_bend"] = float(bend_energy(pos, k_a))
     out["e_contact"] = contact_energy(pos, box, W, k_c)
     return out
 
@@ -145,10 +139,10 @@ class InvariantMonitor:
         self.bounds = bounds if bounds is not None else Bounds.for_scene(sc)
         self.records: list[dict] = []
         self.params = dict(box=sc.box, l0=sc.rest_length, W=sc.width, k_s=sc.k_s, k_a=sc.k_a, k_c=sc.k_c)
-        self.v_b = sc.raw["cell"]["speed_um_per_min"]
+        self.v_b = sc.v_b_um_per_min
 
     def default_window(self) -> int:
-        return max(1, int(round(self.sim.scene.raw["run"]["speed_window_s"] / self.sim.cfg.dt)))
+        return max(1, int(round(self.sim.scene.speed_window_s / self.sim.scene.dt)))
 
     def sample(self, window_steps: int | None = None, measure_only: bool = False) -> dict:
         """Advance one window (default: the scene's speed window) and record; measure_only records the current
@@ -168,9 +162,7 @@ class InvariantMonitor:
             if np.all(np.isfinite(sp)) and np.all(np.isfinite(pos)):
                 speed = float(np.max(sp))
                 fastest = tuple(int(i) for i in np.unravel_index(int(np.argmax(sp)), sp.shape))
-                L = np.asarray(sim.scene.box, dtype=np.float64)
-                d = centres(pos) - c0
-                d -= L * np.round(d / L)
+                d = min_image(centres(pos) - c0, sim.scene.box)
                 centre_speed = float(np.sqrt((d * d).sum(-1)).max() / (sim.time - t0) * 60.0)
             else:
                 speed = centre_speed = float("inf")
@@ -199,7 +191,7 @@ class InvariantMonitor:
         """Human-readable violations over the records after the first `skip`."""
         b = self.bounds
         recs = self.records[skip:]
-        n_cells = self.sim.cfg.n_cells
+        n_cells = self.sim.scene.n_cells
         bad = []
         for r in recs:
             at = f"t={r['t_s']:.3f} s (step {r['step']})"

@@ -3,7 +3,7 @@
 A scene that validates can still be far too large for the machine (a 10^6 µm domain at the paper's density holds
 5 x 10^10 cells): without this check numpy or Taichi dies minutes later with a traceback ('Unable to allocate
 5.82 TiB'). `check_resources(scene)` estimates the memory of every field a Simulation allocates (the same sizes
-as sim.py, tested against Simulation.allocated_fields), of the start's placement and of the per-frame copies, and
+as the Simulation's parts, tested against Simulation.allocated_fields), of the start's placement and of the per-frame copies, and
 refuses the run with one line when it exceeds the memory available, or when a field would have more entries than
 Taichi's 32-bit field indices address."""
 from __future__ import annotations
@@ -35,39 +35,43 @@ def _fmt(n: float) -> str:
 
 
 def field_sizes(scene, contacts: str = "coupled") -> dict:
-    """Name -> (entries, bytes) of every field the scene's Simulation allocates (sim.py, implicit.py)."""
-    from .sim import Config
-    cfg = Config.from_scene(scene)
-    n, N = cfg.n_cells, cfg.N
+    """Name -> (entries, bytes) of every field the scene's Simulation allocates (state.py, neighbours.py, the units
+    of terms/ and the integrator), by the same rules."""
+    from .neighbours import list_radius
+    from .state import SERIAL_BELOW_SEGMENTS, list_capacity
+    n, N = scene.n_cells, scene.N
     P, S, C = n * N, n * (N - 1), n
-    pb = 8 if cfg.precision in ("f64", "mixed") else 4          # positions
-    fb = 8 if cfg.precision == "f64" else 4                      # forces
-    r = cfg.list_radius
-    bins = max(1, int(cfg.Lx // r)) * max(1, int(cfg.Ly // r))
+    pb = 8 if scene.precision in ("f64", "mixed") else 4         # positions
+    fb = 8 if scene.precision == "f64" else 4                     # forces
+    head_tail = scene.guiding != "none" or scene.suppression
+    r = list_radius(scene.rest_length, scene.width, scene.guiding_range if head_tail else 0.0, scene.skin)
+    cap = scene.max_neighbours or list_capacity(r, scene.rest_length, scene.width)
+    Lx, Ly = scene.box
+    bins = max(1, int(Lx // r)) * max(1, int(Ly // r))
     out = {"x": (P, P * 2 * pb), "x_ref": (P, P * 2 * pb), "x_snap": (P, P * 2 * pb),
-           "fa": (S, S * 2 * fb), "fb_": (S, S * 2 * fb), "ke": (C, C * 4),
-           "nbr": (S * cfg.max_nbrs, S * cfg.max_nbrs * 4), "nbr_n": (S, S * 4),
+           "fa": (S, S * 2 * fb), "fb": (S, S * 2 * fb), "ke": (C, C * 4),
+           "nbr": (S * cap, S * cap * 4), "nbr_n": (S, S * 4),
            "bin_count": (bins, bins * 4), "bin_start": (bins + 1, (bins + 1) * 4), "bin_cursor": (bins, bins * 4),
            "bin_items": (S, S * 4), "seg_bin": (S, S * 4), "flags": (4, 16)}
-    if cfg.guiding != "none":
+    if scene.guiding != "none":
         out["g_head"] = (C, C * 2 * fb)
-    if cfg.guiding == "adhesion":
+    if scene.guiding == "adhesion":
         out["g_tail"] = (C, C * 2 * fb)
-    if cfg.suppression:
+    if scene.suppression:
         out["interacting"] = (C, C * 4)
-    if cfg.reversals:
+    if scene.reversals:
         for k in ("rev_clock", "rev_period", "rev_count"):
             out[k] = (C, C * 4)
-    if cfg.slime:
-        g = max(1, int(round(cfg.Lx / cfg.slime_dx))) * max(1, int(round(cfg.Ly / cfg.slime_dx)))
+    if scene.slime:
+        g = max(1, int(round(Lx / scene.slime_grid))) * max(1, int(round(Ly / scene.slime_grid)))
         out["slime"] = (g, g * 2 * 4)
         out["slime_claim"] = (g, g * 4)
-    if cfg.strain:
+    if scene.strain:
         out["strain_seg"] = (S, S * 8)
-    if cfg.mass > 0:
+    if scene.mass > 0 and scene.integrator != "imex":
         out["v"] = (P, P * 2 * fb)
-    if cfg.integrator == "imex":
-        from .implicit import ImplicitSimulation
+    if scene.integrator == "imex":
+        from .terms.contacts import Contacts
         bw = min(6, 2 * N)
         out["Lf"] = (2 * P * (bw + 1), 2 * P * (bw + 1) * fb)
         for k in ("vel", "rhs", "tmp"):
@@ -75,24 +79,20 @@ def field_sizes(scene, contacts: str = "coupled") -> dict:
         out["tan"] = (P, P * 2 * fb)
         out["xrel"] = (P, P * 2 * fb)
         if contacts != "explicit":
-            m = ImplicitSimulation.MAX_CONTACTS
+            m = Contacts.MAX_CONTACTS
             out["ct_n"] = (S, S * 4)
             out["ct_t"] = (S * m, S * m * 4)
             out["ct_w"] = (S * m, S * m * 4 * fb)
+            out["overflow"] = (1, 4)
         if contacts == "coupled":
             for k in ("cg_r", "cg_u", "cg_w", "cg_p", "cg_s", "vprev"):
                 out[k] = (2 * P, 2 * P * fb)
             out["active"] = (C, C * 4)
-            nblk = 1 if S < _serial_below() else min(C, 64)
+            nblk = 1 if S < SERIAL_BELOW_SEGMENTS else min(C, 64)
             out["part"] = (nblk * 3, nblk * 3 * 8)
         out["cgs"] = (8, 64)
         out["cgi"] = (8, 32)
     return out
-
-
-def _serial_below() -> int:
-    from .sim import SERIAL_BELOW_SEGMENTS
-    return SERIAL_BELOW_SEGMENTS
 
 
 def estimate(scene) -> dict:

@@ -1,62 +1,78 @@
-"""Helpers for building small simulations in tests."""
+"""Helpers for building small simulations in tests: the one set of chain, scene and simulation builders (conftest.py's
+fixtures use them), and numpy reference energies with a finite-difference gradient.
+
+Importing it initialises Taichi on the CPU with f64 literals, so f64 scenes are exact to ~1e-12."""
 import math
 
 import numpy as np
 
 from taichimyxo import backend
-from taichimyxo import geometry
 from taichimyxo.init import straight_cell
 from taichimyxo.scene import Scene
 
 backend.init("cpu", default_fp="f64")      # f64 constants, so f64 scenes are exact to ~1e-12
 
 
-def scene(box=(20.0, 20.0), cells=2, **sections):
-    d = {"domain": {"width_um": float(box[0]), "height_um": float(box[1])},
-         "population": {"cells": cells}, "output": {"movie": False}}
-    for sec, body in sections.items():
-        d.setdefault(sec, {}).update(body)
-    return Scene.from_dict(d)
+# ---------------------------------------------------------------- chains, scenes and simulations placed by hand
+L0 = 4.5 / 7            # rest length of the default cell (L = 5 µm, W = 0.5 µm, N = 8: (L - W) / (N - 1))
 
 
-def sim_with(positions, ke=None, box=(20.0, 20.0), **sections):
-    from taichimyxo.sim import make_simulation
-    pos = np.asarray(positions, float)
-    if pos.ndim == 2:
-        pos = pos[None]
-    ke = np.ones(len(pos), int) if ke is None else np.asarray(ke)
-    sc = scene(box=box, cells=len(pos), **sections)
-    return make_simulation(sc, positions=pos, engine_direction=ke)
-
-
-def cell(centre, angle_deg=0.0, N=8, l0=4.5 / 7):
+def cell(centre, angle_deg=0.0, N=8, l0=L0):
+    """Straight chain centred on `centre` along u = (cos, sin)(angle_deg), particle 0 at the -u end. Particle 0 is
+    the head when k_e = +1, so such a cell moves along -u."""
     return straight_cell(np.asarray(centre, float), math.radians(angle_deg), N, l0)
 
 
-def arc_cell(centre, radius, start_deg, N=8, l0=4.5 / 7, direction=1):
-    """Particles on a circle of `radius`, consecutive particles l0 apart (chord)."""
-    dth = 2 * math.asin(l0 / (2 * radius)) * direction
+def arc_cell(centre, radius, start_deg, N=8, l0=L0, direction=1):
+    """Particles on a circle of `radius` around `centre`, consecutive particles l0 apart (chord), particle 0 at
+    start_deg, going counter-clockwise for direction=+1."""
+    dth = 2 * math.asin(min(1.0, l0 / (2 * radius))) * direction
     th = math.radians(start_deg) + dth * np.arange(N)
     return np.stack([centre[0] + radius * np.cos(th), centre[1] + radius * np.sin(th)], axis=1)
 
 
+def ring_radius_for_gap(N, l0, gap_chord):
+    """Radius of a circle on which N particles l0 apart leave a chord `gap_chord` between the two ends."""
+    lo, hi = l0 / 2 + 1e-9, 100.0
+    for _ in range(200):
+        r = 0.5 * (lo + hi)
+        used = (N - 1) * 2 * math.asin(min(1.0, l0 / (2 * r)))
+        rest = 2 * math.pi - used
+        chord = 2 * r * math.sin(rest / 2) if rest > 0 else -1.0
+        if chord < gap_chord:
+            lo = r
+        else:
+            hi = r
+    return 0.5 * (lo + hi)
+
+
+def build_small_scene(cells: int = 2, box=(20.0, 20.0), **sections) -> Scene:
+    """A validated Scene on a small periodic box with the movie off; sections are merged over it, e.g.
+    build_small_scene(3, guiding={"kind": "active"})."""
+    data = {"domain": {"width_um": float(box[0]), "height_um": float(box[1])},
+            "population": {"cells": int(cells)}, "output": {"movie": False}}
+    for sec, vals in sections.items():
+        data.setdefault(sec, {}).update(vals)
+    return Scene.from_dict(data, where="test scene")
+
+
+def sim_with(positions, ke=None, box=(20.0, 20.0), **sections):
+    """The scene integrator's simulation of the given chains ((N, 2) or (n, N, 2)), k_e = +1 by default. Not closed
+    after the test: use the make_sim fixture for that."""
+    from taichimyxo.simulation import make_simulation
+    pos = np.asarray(positions, float)
+    if pos.ndim == 2:
+        pos = pos[None]
+    ke = np.ones(len(pos), int) if ke is None else np.asarray(ke)
+    return make_simulation(build_small_scene(len(pos), box=box, **sections), positions=pos, engine_direction=ke)
+
+
 # ---------------------------------------------------------------- numpy reference energies (docs/model.md terms 1, 2, 4)
-def spring_energy(pos, k_s, l0):
-    l = np.linalg.norm(np.diff(pos, axis=-2), axis=-1)
-    return 0.5 * k_s * np.sum((l - l0) ** 2)
-
-
-def bend_energy(pos, k_a):
-    d = np.diff(pos, axis=-2)
-    a, b = d[..., :-1, :], d[..., 1:, :]
-    th = np.arctan2(a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0], np.sum(a * b, -1))
-    return 0.5 * k_a * np.sum(th ** 2)
-
-
-def contact_energy(pos, box, W, k_c):
-    """The contact energy from its definition (node to nearest point of each other chain), numpy: see
-    taichimyxo.geometry.contact_energy. Written without the kernels' local nearest-segment rule."""
-    return geometry.contact_energy(pos, box, W, k_c)
+# each lives with its term; the contact energy is written from the definition (sample to nearest point of each other
+# chain, global minimum), without the kernels' local nearest-segment rule
+from taichimyxo.terms.bending import energy as bend_energy  # noqa: E402,F401
+from taichimyxo.terms.contacts import energy as contact_energy  # noqa: E402,F401
+from taichimyxo.terms.springs import energy as spring_energy  # noqa: E402,F401
 
 
 def fd_gradient(fun, pos, h=1e-6):

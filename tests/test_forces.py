@@ -21,7 +21,7 @@ def _wiggly(seed=1):
 def test_springs_and_bending_are_minus_energy_gradient():
     pos = _wiggly()
     sim = sim_with(pos, **F64)
-    k_s, k_a = sim.cfg.k_s, sim.cfg.k_a
+    k_s, k_a = sim.scene.k_s, sim.scene.k_a
     f = sim.forces()["internal"][0]
     g = fd_gradient(lambda p: spring_energy(p, k_s, L0) + bend_energy(p, k_a), pos, h=1e-7)
     np.testing.assert_allclose(f, -g, rtol=1e-5, atol=1e-4 * np.abs(g).max())
@@ -33,7 +33,7 @@ def test_bending_alone_on_an_arc_with_rest_lengths(k_a):
     pos = arc_cell((10, 10), 3.0, 0.0)          # chords exactly l0: springs at rest, only bending acts
     sim = sim_with(pos, cell={"k_a_N_m": k_a}, **F64)
     f = sim.forces()["internal"][0]
-    g = fd_gradient(lambda p: bend_energy(p, sim.cfg.k_a), pos, h=1e-7)
+    g = fd_gradient(lambda p: bend_energy(p, sim.scene.k_a), pos, h=1e-7)
     assert np.abs(g).max() > 0
     np.testing.assert_allclose(f, -g, rtol=1e-5, atol=1e-6 * np.abs(g).max())
     # bending forces are internal: no net force, no net torque
@@ -47,7 +47,7 @@ def test_springs_alone_on_a_stretched_straight_chain():
     pos = cell((10, 10), 0.0, l0=L0 * 1.05)       # straight: no bending
     sim = sim_with(pos, **F64)
     f = sim.forces()["internal"][0]
-    g = fd_gradient(lambda p: spring_energy(p, sim.cfg.k_s, L0), pos, h=1e-7)
+    g = fd_gradient(lambda p: spring_energy(p, sim.scene.k_s, L0), pos, h=1e-7)
     np.testing.assert_allclose(f, -g, rtol=1e-6, atol=1e-6)
     assert f[0, 0] > 0 and f[-1, 0] < 0            # a stretched chain contracts
     sim.close()

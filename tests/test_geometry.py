@@ -7,7 +7,7 @@ from taichimyxo import backend
 from taichimyxo.geometry import closest_points as np_closest
 
 backend.init("cpu")
-from taichimyxo.sim import closest_points as ti_closest  # noqa: E402
+from taichimyxo.terms.guiding import closest_points as ti_closest  # noqa: E402
 
 CASES = {
     # name: (p1, q1, p2, q2, expected distance, expected s, expected t)

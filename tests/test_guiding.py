@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from simtools import arc_cell, cell, scene, sim_with
-from taichimyxo.sim import make_simulation
+from simtools import arc_cell, build_small_scene, cell, sim_with
+from taichimyxo.simulation import make_simulation
 
 W = 0.5
 L0 = 4.5 / 7
@@ -71,7 +71,7 @@ def test_passive_following_turns_but_never_speeds_up(distance):
         p1 = sim.positions()
         axis = p0[1, 0] - p0[1, -1]
         axis /= np.linalg.norm(axis)
-        vel = (p1[1].mean(0) - p0[1].mean(0)) / (50 * sim.cfg.dt) * 60
+        vel = (p1[1].mean(0) - p0[1].mean(0)) / (50 * sim.scene.dt) * 60
         axial.append(np.dot(vel, axis))
     p = sim.positions()
     heading1 = p[1, 0] - p[1, 1]
@@ -127,10 +127,10 @@ def test_a_cell_crossing_a_slime_trail_at_30_degrees_turns_onto_it(trail_sign):
     c = cell((6.0, 8.3), 30.0 + 180.0)          # particle 0 leads toward +30 degrees, 1.5 µm below the trail
     sim = sim_with(c, box=(40.0, 20.0), slime={"enabled": True}, cell={"k_a_N_m": 1e-16},
                    run={"dt_ms": 2.0})
-    grid = np.zeros((sim.sgx, sim.sgy, 2), np.float32)
+    grid = np.zeros((sim.model.slime.sgx, sim.model.slime.sgy, 2), np.float32)
     rows = slice(int(9.75 / 0.25), int(10.25 / 0.25))
     grid[:, rows, 0] = trail_sign
-    sim.slime.from_numpy(grid)
+    sim.model.slime.slime.from_numpy(grid)
     sim.run(30000)                               # 60 s: the cell reaches the trail and follows it
     p = sim.positions()[0]
     heading = p[0] - p[1]
@@ -148,7 +148,7 @@ def test_deposition_writes_the_rear_tangent_under_the_rear_particle():
         p = sim.positions()[0]
         rear, nxt = (p[-1], p[-2]) if ke > 0 else (p[0], p[1])
         t = (nxt - rear) / np.linalg.norm(nxt - rear)
-        grid = sim.slime.to_numpy()
+        grid = sim.model.slime.slime.to_numpy()
         ix, iy = (np.floor(np.mod(rear, 20.0) / 0.25)).astype(int)
         np.testing.assert_allclose(grid[ix, iy], t, atol=1e-6)
         assert np.count_nonzero(np.abs(grid).sum(-1)) == 1
@@ -157,8 +157,8 @@ def test_deposition_writes_the_rear_tangent_under_the_rear_particle():
 
 def test_observed_reversal_intervals_match_the_period_distribution():
     T = 3.0                                      # s
-    sim = make_simulation(scene(box=(60.0, 60.0), cells=60, reversals={"enabled": True, "period_min": T / 60},
-                                run={"dt_ms": 2.0}))
+    sim = make_simulation(build_small_scene(box=(60.0, 60.0), cells=60,
+                                            reversals={"enabled": True, "period_min": T / 60}, run={"dt_ms": 2.0}))
     ke_prev = sim.engine_direction()
     last = np.full(60, np.nan)
     intervals = []
@@ -212,8 +212,8 @@ def test_strain_energy_of_a_known_overlap_is_split_in_halves():
     pos = np.stack([a, b])
     sim = sim_with(pos, output={"strain": True}, run={"precision": "f64"})
     e = sim.segment_strain()
-    total = contact_energy(pos, (20.0, 20.0), W, sim.cfg.k_c) * 1e-18          # J
-    assert total > 0.5 * 0.5 * sim.cfg.k_c * depth ** 2 * 1e-18                 # at least the pole's own contact
+    total = contact_energy(pos, (20.0, 20.0), W, sim.scene.k_c) * 1e-18          # J
+    assert total > 0.5 * 0.5 * sim.scene.k_c * depth ** 2 * 1e-18                 # at least the pole's own contact
     assert e.sum() == pytest.approx(total, rel=1e-9)
     assert e[1, 0] == pytest.approx(total / 2, rel=1e-9)
     assert e[1, 1:].sum() == 0.0
@@ -240,6 +240,10 @@ def test_only_the_effects_a_scene_uses_are_allocated(name, expected):
     sim = make_simulation(sc)
     have = {k for k in sim.allocated_fields() if k in EFFECT_FIELDS}
     assert have == expected
-    for k in EFFECT_FIELDS - expected:
-        assert getattr(sim, k) is None
+    units = {u.name for u in sim.model.units}             # an effect's unit exists only when the scene uses it
+    assert ("slime" in units) == ("slime" in expected)
+    assert ("reversals" in units) == ("rev_clock" in expected)
+    assert ("strain" in units) == ("strain_seg" in expected)
+    assert ("guiding" in units) == bool(expected & {"g_head", "interacting"})
+    assert sim.integrator.v is None
     sim.close()

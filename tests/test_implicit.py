@@ -1,4 +1,4 @@
-"""The linearly implicit step (taichimyxo/implicit.py, scene run.integrator = "imex") against the explicit one.
+"""The linearly implicit step (taichimyxo/integrators/imex.py, scene run.integrator = "imex") against the explicit one.
 
 Every comparison runs the paper's explicit step at a small step (0.5 ms) as the reference and the implicit step at
 steps 40-100 times larger. Simulations are built once per module (each compiles its kernels) and reloaded with
@@ -8,17 +8,17 @@ set_state for each case.
 import numpy as np
 import pytest
 
-from simtools import arc_cell, cell, scene
+from simtools import arc_cell, build_small_scene, cell
 
-from taichimyxo.implicit import ImplicitSimulation
-from taichimyxo.sim import Simulation
+from taichimyxo.simulation import Simulation
+from taichimyxo.terms.bending import bend_angles
 
 L0 = 4.5 / 7
 V_B = 4.0 / 60.0          # µm/s
 
 
 def _scene(integrator, dt_ms, k_a=1e-17, **sections):
-    return scene(box=(20.0, 20.0), cells=2, cell={"k_a_N_m": k_a},
+    return build_small_scene(box=(20.0, 20.0), cells=2, cell={"k_a_N_m": k_a},
                  run={"precision": "f64", "integrator": integrator, "dt_ms": dt_ms}, **sections)
 
 
@@ -39,16 +39,10 @@ def pair():
     """(explicit, implicit) simulations of two flexible cells; states are loaded per test."""
     pos = np.stack([cell((10.0, 10.0)), _far()])
     ex = Simulation(_scene("explicit", 0.5), positions=pos, engine_direction=np.ones(2))
-    im = ImplicitSimulation(_scene("imex", 50.0), positions=pos, engine_direction=np.ones(2))
+    im = Simulation(_scene("imex", 50.0), positions=pos, engine_direction=np.ones(2))
     yield ex, im
     ex.close()
     im.close()
-
-
-def bend_angles(p):
-    d = np.diff(p, axis=0)
-    a, b = d[:-1], d[1:]
-    return np.arctan2(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0], (a * b).sum(-1))
 
 
 @pytest.mark.parametrize("dt_ms", [10.0, 100.0])
@@ -123,7 +117,7 @@ def test_one_sided_contact_drag_is_wrong():
     """The error the coupled solve avoids: each cell treating its contacts implicitly as if the other body were
     fixed (contacts='diagonal') adds a drag dt k_c to bodies that push each other: at 50 ms A is > 5 % slow."""
     pos, ke = _t_push()
-    sim = ImplicitSimulation(_scene("imex", 50.0), positions=pos, engine_direction=ke, contacts="diagonal")
+    sim = Simulation(_scene("imex", 50.0), positions=pos, engine_direction=ke, contacts="diagonal")
     try:
         p = run_for(sim, 20.0, 50.0)
     finally:
@@ -136,7 +130,7 @@ def test_one_sided_contact_drag_is_wrong():
 def rigid_pair():
     pos = np.stack([cell((10.0, 10.0)), _far()])
     ex = Simulation(_scene("explicit", 10.0, k_a=1e-15), positions=pos, engine_direction=np.ones(2))
-    im = ImplicitSimulation(_scene("imex", 10.0, k_a=1e-15), positions=pos, engine_direction=np.ones(2))
+    im = Simulation(_scene("imex", 10.0, k_a=1e-15), positions=pos, engine_direction=np.ones(2))
     yield ex, im
     ex.close()
     im.close()

@@ -89,13 +89,13 @@ import numpy as np, sys
 from taichimyxo import backend
 backend.init("cpu", threads=int(sys.argv[1]))
 from taichimyxo.scene import Scene
-from taichimyxo.sim import make_simulation
+from taichimyxo.simulation import make_simulation
 sc = Scene.from_dict({"domain": {"width_um": 40.0, "height_um": 40.0}, "population": {"cells": 120},
                       "guiding": {"kind": sys.argv[3]}, "reversals": {"enabled": True, "period_min": 0.05},
                       "slime": {"enabled": sys.argv[3] == "none"}})
 sim = make_simulation(sc)
 sim.run(400)
-np.save(sys.argv[2], sim.x.to_numpy())
+np.save(sys.argv[2], sim.state.x.to_numpy())
 """
 
 

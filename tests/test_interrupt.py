@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import build_small_scene
+from simtools import build_small_scene
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -71,7 +71,7 @@ def test_stop_and_resume_in_process_equals_uninterrupted(ti_cpu, tmp_path, varia
     on disk. Split: stopped after 3100 steps (inside a speed window), resumed for the remaining 4100. The two final
     checkpoints (positions, speed-window start, engine directions, reversal clocks, slime grid) and every
     trajectory frame are identical."""
-    from taichimyxo.run import run_scene
+    from taichimyxo.scene_run import run_scene
     from taichimyxo.trajectory import count_frames, read_frames
     sections = dict(SCENES[variant])
     sections["run"] = {"hours": 0.002, "seed": 7, "dt_ms": 1.0}         # 7200 steps
@@ -110,7 +110,7 @@ def test_stop_and_resume_in_process_equals_uninterrupted(ti_cpu, tmp_path, varia
 
 @needs_render
 def test_interrupted_movie_is_readable_and_resumes(ti_cpu, tmp_path):
-    from taichimyxo.run import run_scene
+    from taichimyxo.scene_run import run_scene
     from taichimyxo.trajectory import count_frames
     sc = build_small_scene(20, run={"hours": 0.001, "dt_ms": 1.0}, output={"movie": True, "frame_interval_min": 0.005,
                                                              "video_width": 128, "video_height": 96})

@@ -6,8 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from simtools import cell, scene, sim_with
-from taichimyxo.sim import make_simulation
+from simtools import build_small_scene, cell, sim_with
+from taichimyxo.geometry import min_image
+from taichimyxo.simulation import make_simulation
 
 W = 0.5
 L0 = 4.5 / 7
@@ -27,7 +28,7 @@ def test_normal_drag_is_half_the_tangential_drag():
     x0 = sim.positions()
     sim.run(1)
     dx = sim.positions() - x0
-    dt = sim.cfg.dt
+    dt = sim.scene.dt
     zeta_t = sim.scene.zeta_t
     assert sim.scene.zeta_n == pytest.approx(0.5 * zeta_t)
     # straight cells along x: the tangent of every particle is -x for k_e = +1 (particle 0 leads toward -x)
@@ -56,7 +57,7 @@ def test_mass_spring_step_reproduces_the_overdamped_run():
         sim = sim_with(pos, guiding={"kind": "active"}, run={**F64, "dt_ms": 2.0, "mass_pg": mass})
         sim.run(5000)
         out[mass] = sim.positions()
-        assert (sim.v is None) == (mass == 0.0)
+        assert (sim.integrator.v is None) == (mass == 0.0)
         sim.close()
     moved = np.abs(out[0.0] - pos).max()
     assert moved > 0.5                                          # they did collide and travel
@@ -122,12 +123,12 @@ def test_slime_is_overwritten_by_the_latest_cell_and_persists():
     a = cell((4.0, ya), 180.0)                    # moving +x along the row, rear from x = 1.75 to 5.75 in 60 s
     b = cell((xb, 12.0), 90.0)                    # moving -y along the column, rear from y = 14.25 to 10.25
     sim = sim_with(np.stack([a, b]), box=(20.0, 20.0), slime={"enabled": True}, run={"dt_ms": 2.0})
-    grid = np.zeros((sim.sgx, sim.sgy, 2), np.float32)
+    grid = np.zeros((sim.model.slime.sgx, sim.model.slime.sgy, 2), np.float32)
     grid[:, ix(ya)] = (-1.0, 0.0)                 # an older trail along the row, laid toward -x
     grid[ix(xb), :] = (0.0, 1.0)                  # and one along the column, laid toward +y
-    sim.slime.from_numpy(grid)
+    sim.model.slime.slime.from_numpy(grid)
     sim.run(30000)                                # 60 s
-    g = sim.slime.to_numpy()
+    g = sim.model.slime.slime.to_numpy()
     for x in (2.5, 3.0, 4.0, 5.0):                # passed by a's rear: overwritten with a's tangent
         np.testing.assert_allclose(g[ix(x), ix(ya)], (1.0, 0.0), atol=2e-3)
     for y in (11.0, 12.0, 13.0, 14.0):            # passed by b's rear
@@ -140,7 +141,7 @@ def test_slime_is_overwritten_by_the_latest_cell_and_persists():
     p = sim.positions()
     assert abs(p[0, :, 1].mean() - ya) < 0.05 and abs(p[1, :, 0].mean() - xb) < 0.05
     sim.run(2500)                                 # 5 s more: what was written stays
-    g2 = sim.slime.to_numpy()
+    g2 = sim.model.slime.slime.to_numpy()
     np.testing.assert_array_equal(g2[ix(3.0), ix(ya)], g[ix(3.0), ix(ya)])
     np.testing.assert_array_equal(g2[ix(xb), ix(13.0)], g[ix(xb), ix(13.0)])
     sim.close()
@@ -156,7 +157,7 @@ def test_overlap_counts_as_interaction_for_suppression(gap):
     sim = sim_with(np.stack([leader, follower, loner]), box=(30.0, 30.0), guiding={"kind": "active"},
                    reversals={"enabled": True, "suppression": True}, run=F64)
     sim.forces()
-    flags = sim.interacting.to_numpy()
+    flags = sim.model.guiding.interacting.to_numpy()
     assert flags[1] != 0 and flags[0] != 0 and flags[2] == 0
     sim.close()
 
@@ -168,23 +169,23 @@ def test_neighbour_list_never_misses_what_all_pairs_see():
     box), bit for bit in f64. The list is rebuilt from real displacements, not from an assumed top speed."""
     sc_kw = dict(box=(15.0, 15.0), cells=14, cell={"k_a_N_m": 1e-18}, guiding={"kind": "active"},
                  run={**F64, "dt_ms": 2.0})
-    sim = make_simulation(scene(**sc_kw))
+    sim = make_simulation(build_small_scene(**sc_kw))
     ref_kw = dict(sc_kw)
     ref_kw["run"] = {**F64, "dt_ms": 2.0, "skin_um": 25.0, "max_neighbours": 14 * 7}
-    ref = make_simulation(scene(**ref_kw), positions=sim.positions(), engine_direction=sim.engine_direction())
-    assert ref.nbr_n.to_numpy().min() >= 14 * 7 - 3          # every other segment of every cell is listed
+    ref = make_simulation(build_small_scene(**ref_kw), positions=sim.positions(),
+                          engine_direction=sim.engine_direction())
+    assert ref.neighbours.nbr_n.to_numpy().min() >= 14 * 7 - 3          # every other segment of every cell is listed
     worst = 0.0
-    v_b_step = sim.scene.v_b * sim.cfg.dt
+    v_b_step = sim.scene.v_b * sim.scene.dt
     for _ in range(1500):                                     # 3 s
-        x_before = sim.x.to_numpy()
+        x_before = sim.state.x.to_numpy()
         sim.run(1)
-        ref.x.from_numpy(sim.x.to_numpy())
-        ref.ke.from_numpy(sim.ke.to_numpy())
+        ref.state.x.from_numpy(sim.state.x.to_numpy())
+        ref.state.ke.from_numpy(sim.state.ke.to_numpy())
         fs, fr = sim.forces(), ref.forces()
         np.testing.assert_array_equal(fs["contact"], fr["contact"])
         np.testing.assert_array_equal(fs["total"], fr["total"])
-        d = sim.x.to_numpy() - x_before
-        d -= 15.0 * np.round(d / 15.0)
+        d = min_image(sim.state.x.to_numpy() - x_before, (15.0, 15.0))
         worst = max(worst, float(np.linalg.norm(d, axis=1).max()))
     assert sim.rebuilds >= 3                                   # the list was rebuilt during the run
     assert worst > 3 * v_b_step                               # heads did swing faster than cells move
@@ -195,7 +196,7 @@ def test_neighbour_list_never_misses_what_all_pairs_see():
 def test_displayed_speed_window_opens_at_the_previous_frame_when_frames_are_closer(tmp_path):
     """Frames every 3 s with a 10 s speed window: the window opens at the previous frame (so the speed is over the
     last 3 s), not at step 0 (the old behaviour: the net displacement since the start)."""
-    from taichimyxo.run import run_scene
+    from taichimyxo.scene_run import run_scene
     from taichimyxo.scene import Scene
     sc = Scene.from_dict({"scene": {"name": "win"}, "domain": {"width_um": 20.0, "height_um": 20.0},
                           "population": {"cells": 1},

@@ -18,7 +18,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from conftest import arc, build_small_scene, ring_radius_for_gap, straight
+from simtools import arc_cell, build_small_scene, cell, ring_radius_for_gap
 from taichimyxo.invariants import Bounds, InvariantMonitor, check_invariants, measure
 
 STIFFNESS = {"very flexible": 1e-18, "flexible": 1e-17, "rigid": 1e-16, "very rigid": 1e-15}
@@ -34,8 +34,8 @@ def _ke(*k):
 # ------------------------------------------------------------------------------------------- the checker itself
 def test_measure_known_states():
     box = (20.0, 20.0)
-    a = straight((10, 10), 0.0, N, L0)
-    b = straight((10, 10.2), 0.0, N, L0)                  # parallel, 0.2 µm = 0.4 W apart
+    a = cell((10, 10), 0.0, N, L0)
+    b = cell((10, 10.2), 0.0, N, L0)                  # parallel, 0.2 µm = 0.4 W apart
     m = measure(np.stack([a, b]), box, L0, W, 1e4, 10.0, 1e4)
     assert m["finite"] and m["len_min"] == pytest.approx(1) and m["len_max"] == pytest.approx(1)
     assert m["d_other_min"] == pytest.approx(0.4)
@@ -56,7 +56,7 @@ def test_checker_catches_an_unstable_step(small_scene, make_sim):
     """The same overlapping pair at 20 ms (beyond the explicit limit, which --force would allow) violates the
     invariants: the checker is not vacuous."""
     sc = small_scene(2, run={"dt_ms": 20.0})
-    sim = make_sim(sc, np.stack([straight((10, 10), 0.0, N, L0), straight((10, 10.15), 0.1, N, L0)]), _ke(1, -1))
+    sim = make_sim(sc, np.stack([cell((10, 10), 0.0, N, L0), cell((10, 10.15), math.degrees(0.1), N, L0)]), _ke(1, -1))
     with pytest.raises(AssertionError, match="violation|non-finite"):
         check_invariants(sim, 200, window_steps=50)
 
@@ -78,10 +78,10 @@ def test_very_rigid_cells_at_the_default_step(small_scene, make_sim):
     head driven into a cell's side at an angle, at the scene's step."""
     sc = small_scene(4, cell={"k_a_N_m": 1e-15})
     th = math.pi / 2 + 0.3                                                  # the 4th cell moves down, tilted
-    cells = [arc((6, 6), 1.6, 0.0, N, L0),                                   # bent 0.4 rad at every joint
-             straight((13.0, 10.0), 0.0, N, L0), straight((13.0 + 4.5 + 0.4, 10.0), 0.0, N, L0),   # heads 0.4 apart
-             straight(np.array([13.0, 10.6]) + 0.5 * (N - 1) * L0 * np.array([math.cos(th), math.sin(th)]), th,
-                      N, L0)]                                 # head 0.6 µm from cell 2's axis (a 0.1 µm gap)
+    cells = [arc_cell((6, 6), 1.6, 0.0, N, L0),                              # bent 0.4 rad at every joint
+             cell((13.0, 10.0), 0.0, N, L0), cell((13.0 + 4.5 + 0.4, 10.0), 0.0, N, L0),   # heads 0.4 apart
+             cell(np.array([13.0, 10.6]) + 0.5 * (N - 1) * L0 * np.array([math.cos(th), math.sin(th)]),
+                  math.degrees(th), N, L0)]                   # head 0.6 µm from cell 2's axis (a 0.1 µm gap)
     sim = make_sim(sc, np.stack(cells), _ke(1, -1, 1, 1))
     # The bent cell stores 490 pN·µm and unbends with ~600 pN at its joints: its ends move at ~15 v_b for a while
     # (an overdamped relaxation, the same at dt / 4), so the speed bound starts after it.
@@ -116,12 +116,12 @@ def test_guiding_at_gap_zero_and_at_the_cutoff(small_scene, make_sim, kind):
         guiding["distance"] = "particles"
     sc = small_scene(2, guiding=guiding)
     d_g, f_max = sc.raw["guiding"]["range_um"], sc.raw["guiding"]["f_max_pN"]
-    leader = straight((10.0, 10.0), 0.0, N, L0)              # k_e = +1: moves along -x, tail = particle N-1
+    leader = cell((10.0, 10.0), 0.0, N, L0)              # k_e = +1: moves along -x, tail = particle N-1
     u = np.array([math.cos(math.radians(30)), math.sin(math.radians(30))])
     sim = None
     for gap in (0.0, d_g, d_g * (1 - 1e-6)):
         head = leader[-1] + (W + gap) * u
-        follower = straight(head + 0.5 * (N - 1) * L0 * np.array([1.0, 0.0]), 0.0, N, L0)   # head = particle 0
+        follower = cell(head + 0.5 * (N - 1) * L0 * np.array([1.0, 0.0]), 0.0, N, L0)   # head = particle 0
         pos = np.stack([leader, follower])
         assert _head_tail_gap(pos) == pytest.approx(gap, abs=1e-12)
         if sim is None:
@@ -148,7 +148,7 @@ def test_two_cells_exactly_on_top_of_each_other(small_scene, make_sim, same_dire
     """Identical positions (segment distance 0 everywhere): the contact normal is undefined, so a fixed rule picks
     one; the cells must separate to beyond 0.3 W within 0.3 s and then behave."""
     sc = small_scene(2, collisions={"k_c_N_per_m": k_c})
-    a = straight((10.0, 10.0), 0.4, N, L0)
+    a = cell((10.0, 10.0), math.degrees(0.4), N, L0)
     sim = make_sim(sc, np.stack([a, a.copy()]), _ke(1, 1 if same_direction else -1))
     print(check_invariants(sim, 3000, settle_steps=300).summary())
 
@@ -159,7 +159,7 @@ def test_parallel_and_collinear_segments_in_contact(small_scene, make_sim, layou
     """Degenerate closest-point geometry: exactly parallel segments side by side (the contact point is the middle
     of the overlap), and exactly collinear segments end to end or lying along each other."""
     sc = small_scene(2)
-    a = straight((10.0, 10.0), 0.0, N, L0)
+    a = cell((10.0, 10.0), 0.0, N, L0)
     settle = 0
     if layout == "parallel-sliding":
         pos, ke = np.stack([a, a + [1.0, 0.7 * W]]), _ke(1, -1)
@@ -182,7 +182,7 @@ def test_cell_bent_into_a_ring_following_its_own_tail(small_scene, make_sim, sti
     ring is far from equilibrium (1100 pN on the head): it unbends first (speed bound off for that)."""
     sc = small_scene(1, cell={"k_a_N_m": STIFFNESS[stiffness]}, guiding={"kind": "active", "self": True})
     r = ring_radius_for_gap(N, L0, W + 0.1)
-    ring = arc((10.0, 10.0), r, 0.0, N, L0, sense=-1)      # particle 0 = head, moving counter-clockwise
+    ring = arc_cell((10.0, 10.0), r, 0.0, N, L0, direction=-1)      # particle 0 = head, moving counter-clockwise
     sim = make_sim(sc, ring[None], _ke(1))
     # the head is pulled toward its own tail
     f = sim.forces()
@@ -203,11 +203,11 @@ def test_particles_faster_than_5_vb_are_physical(small_scene, make_sim, case):
     for dt_ms in (1.0, 0.25):
         if case == "rigid-ring":
             sc = small_scene(1, cell={"k_a_N_m": 1e-16}, guiding={"kind": "active"}, run={"dt_ms": dt_ms})
-            pos = arc((10.0, 10.0), ring_radius_for_gap(N, L0, W + 0.1), 0.0, N, L0, sense=-1)[None]
+            pos = arc_cell((10.0, 10.0), ring_radius_for_gap(N, L0, W + 0.1), 0.0, N, L0, direction=-1)[None]
             ke = _ke(1)
         else:
             sc = small_scene(2, guiding={"kind": "active"}, run={"dt_ms": dt_ms})
-            a = straight((10.0, 10.0), 0.0, N, L0)
+            a = cell((10.0, 10.0), 0.0, N, L0)
             pos, ke = np.stack([a, a + [1.0, 0.75 * W]]), _ke(1, -1)
         sim = make_sim(sc, pos, ke)
         mon = InvariantMonitor(sim)
@@ -224,7 +224,7 @@ def test_hairpin_self_contact_of_segments_k_and_k_plus_2(small_scene, make_sim):
     """docs/model.md term 4: non-adjacent segments of one cell collide. Head segment folded back by 170 degrees: segments
     0 and 2 are 0.11 µm apart (< W), so there must be a contact force."""
     sc = small_scene(1)
-    pos = straight((10.0, 10.0), 0.0, N, L0)
+    pos = cell((10.0, 10.0), 0.0, N, L0)
     pos[0] = pos[1] + L0 * np.array([math.cos(math.radians(10)), math.sin(math.radians(10))])
     from taichimyxo.geometry import closest_points
     assert closest_points(pos[0], pos[1], pos[2], pos[3])[4] < 0.25 * W
@@ -237,20 +237,20 @@ def test_reversal_during_contact_and_during_guiding(small_scene, make_sim, durin
     """Cells reverse (k_e flips, head and tail swap) while in a side contact, or while pulled head to tail."""
     sc = small_scene(3, guiding={"kind": "active"},
                      reversals={"enabled": True, "period_min": 0.02, "period_sd_fraction": 0.0})
-    a = straight((10.0, 10.0), 0.0, N, L0)
+    a = cell((10.0, 10.0), 0.0, N, L0)
     if during == "contact":
         pos = np.stack([a, a + [1.0, 0.75 * W], a + [-1.0, -0.75 * W]])
         ke = _ke(1, -1, -1)
     else:
         u = np.array([math.cos(0.4), math.sin(0.4)])
-        b = straight(a[-1] + (W + 0.1) * u + [0.5 * (N - 1) * L0, 0.0], 0.0, N, L0)
-        c = straight(b[-1] + (W + 0.2) * np.array([1.0, 0.0]) + [0.5 * (N - 1) * L0, 0.0], 0.0, N, L0)
+        b = cell(a[-1] + (W + 0.1) * u + [0.5 * (N - 1) * L0, 0.0], 0.0, N, L0)
+        c = cell(b[-1] + (W + 0.2) * np.array([1.0, 0.0]) + [0.5 * (N - 1) * L0, 0.0], 0.0, N, L0)
         pos = np.stack([a, b, c])
         ke = _ke(1, 1, 1)
     sim = make_sim(sc, pos, ke)
     # every cell reverses 20 steps from now (mid-contact / mid-pull), then every 1.2 s
-    per = sim.rev_period.to_numpy()
-    sim.rev_clock.from_numpy((per - 20).astype(np.int32))
+    per = sim.model.reversals.rev_period.to_numpy()
+    sim.model.reversals.rev_clock.from_numpy((per - 20).astype(np.int32))
     f0 = sim.forces()
     if during == "contact":
         assert np.abs(f0["contact"]).sum() > 0
@@ -258,9 +258,9 @@ def test_reversal_during_contact_and_during_guiding(small_scene, make_sim, durin
         assert np.linalg.norm(f0["total"][1, 0]) > 0
     ke0 = sim.engine_direction().copy()
     mon = check_invariants(sim, 3000)
-    assert int(sim.rev_count.to_numpy().min()) >= 2
+    assert int(sim.model.reversals.rev_count.to_numpy().min()) >= 2
     assert mon.records[1]["step"] > 20
-    assert np.all(sim.engine_direction() == ke0 * (-1) ** sim.rev_count.to_numpy())
+    assert np.all(sim.engine_direction() == ke0 * (-1) ** sim.model.reversals.rev_count.to_numpy())
     print(mon.summary())
 
 
@@ -269,9 +269,9 @@ def test_cells_across_the_corner_of_the_box(small_scene, make_sim):
     touching it through the wrap in x and y, and a perpendicular cell driving its head into its side."""
     sc = small_scene(3, box=(12.0, 12.0), guiding={"kind": "active"})
     u = np.array([1.0, -1.0]) / math.sqrt(2)
-    a = straight((0.0, 0.0), math.radians(45), N, L0)
-    b = straight(0.49 * np.array([-1.0, 1.0]) / math.sqrt(2), math.radians(45), N, L0)   # 0.98 W: touching
-    c = straight((0.45 + 0.5 * (N - 1) * L0) * u, math.radians(-45), N, L0)              # head 0.9 W from a
+    a = cell((0.0, 0.0), 45.0, N, L0)
+    b = cell(0.49 * np.array([-1.0, 1.0]) / math.sqrt(2), 45.0, N, L0)   # 0.98 W: touching
+    c = cell((0.45 + 0.5 * (N - 1) * L0) * u, -45.0, N, L0)              # head 0.9 W from a
     sim = make_sim(sc, np.stack([a, b, c]), _ke(1, -1, 1))
     pos = sim.positions()
     assert np.all(pos[:, 0] >= 0) and np.any(pos < 0) or np.any(pos > 12.0)             # chains cross the wrap
@@ -286,15 +286,15 @@ def test_slime_element_at_the_wrap(small_scene, make_sim, box):
     into the last/first column, and a follower crossing the wrap along that trail (10.1 µm: the grid does not divide
     the box, the wrapping column is narrower)."""
     sc = small_scene(2, box=(box, box), slime={"enabled": True})
-    lead = straight((0.0, 5.0), 0.0, N, L0)
+    lead = cell((0.0, 5.0), 0.0, N, L0)
     lead -= [lead[0, 0], 0.0]                                   # particle 0 (the rear, k_e = -1) exactly at x = 0
-    follow = straight((box - 0.5 * (N - 1) * L0 - 0.6, 5.05), 0.1, N, L0)
+    follow = cell((box - 0.5 * (N - 1) * L0 - 0.6, 5.05), math.degrees(0.1), N, L0)
     sim = make_sim(sc, np.stack([lead, follow]), _ke(-1, -1))   # both move along +x
     sim.run(1)
-    s = sim.slime.to_numpy()
+    s = sim.model.slime.slime.to_numpy()
     assert np.abs(s[0]).sum() > 0                              # deposited into the first column
     mon = check_invariants(sim, 4000)
-    s = sim.slime.to_numpy()
+    s = sim.model.slime.slime.to_numpy()
     assert np.all(np.isfinite(s))
     n = np.linalg.norm(s, axis=-1)
     assert np.all((n == 0) | (np.abs(n - 1) < 1e-5))           # unit vectors or empty
@@ -317,7 +317,7 @@ def test_smallest_allowed_domain(small_scene, make_sim, what):
 def test_single_cell(small_scene, make_sim):
     """A single free cell moves straight at v_b (self-following on: its own tail is far away)."""
     sc = small_scene(1, guiding={"kind": "active"})
-    sim = make_sim(sc, straight((10.0, 10.0), 0.7, N, L0)[None], _ke(1))
+    sim = make_sim(sc, cell((10.0, 10.0), math.degrees(0.7), N, L0)[None], _ke(1))
     mon = check_invariants(sim, 2000)
     assert mon.records[-1]["speed_max_vb"] == pytest.approx(1.0, rel=1e-3)
 
@@ -345,7 +345,7 @@ def test_random_small_configurations_stay_bounded(sim_cache, n, stiffness, k_c, 
     either k_c and any guiding kind: 1000 steps at the default step keep every invariant. One Simulation per
     compile-time configuration; new positions are loaded with set_state."""
     from taichimyxo.init import random_start
-    from taichimyxo.sim import make_simulation
+    from taichimyxo.simulation import make_simulation
     box = 10.0 if crowd else 12.0
     sc = build_small_scene(n, box=(box, box), cell={"k_a_N_m": STIFFNESS[stiffness]},
                            collisions={"k_c_N_per_m": k_c}, guiding={"kind": guiding}, run={"seed": seed})

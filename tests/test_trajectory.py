@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import build_small_scene
+from simtools import build_small_scene
 from taichimyxo.frame import Frame
 from taichimyxo.trajectory import TrajectoryWriter
 
@@ -48,7 +48,7 @@ def run_with_movie(tmp_path_factory):
     """6 cells, 7200 steps of 1 ms: a movie frame every 600 steps, a trajectory frame every 1200."""
     from taichimyxo import backend
     backend.init("cpu", int(os.environ["TAICHIMYXO_THREADS"]))
-    from taichimyxo.run import run_scene
+    from taichimyxo.scene_run import run_scene
     movie = verify_video is not None
     sc = build_small_scene(6, run={"hours": 0.002, "dt_ms": 1.0, "seed": 3},
                            output={"movie": movie, "frame_interval_min": 0.01, "trajectory_interval_min": 0.02,

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import build_small_scene
+from simtools import build_small_scene
 from taichimyxo.scene import Scene, SceneError, available_scenes, defaults
 
 REPO = Path(__file__).resolve().parent.parent
@@ -244,20 +244,41 @@ def test_videos_only_accepts_every_listed_scene(tmp_path, monkeypatch):
         videos.regenerate(only="S99", out_dir=str(tmp_path))
 
 
-def test_benchmarks_default_to_a_results_folder_in_the_current_directory():
+def _benchmark(name: str):
+    """A script of benchmarks/ as a module (they import their neighbour benchlib: benchmarks/ goes on the path)."""
+    import importlib
+    if str(REPO / "benchmarks") not in sys.path:
+        sys.path.insert(0, str(REPO / "benchmarks"))
+    return importlib.import_module(name)
+
+
+def test_benchmarks_default_to_a_results_folder_in_the_current_directory(tmp_path, capsys):
+    """Benchmarks are scripts of the clone (benchmarks/), not a command of the installed tool; each writes into
+    benchmarks-results/ in the current directory unless --out names a folder, and the stability sweep writes the
+    limits it measured there too, never into the package's stability_limits.json."""
     import inspect
-    from taichimyxo import bench, bench_accuracy
     from taichimyxo.cli import _build_parser
-    args = _build_parser().parse_args(["bench", "stability"])
-    assert args.out == "benchmarks-results" and not args.write_limits
-    assert inspect.signature(bench_accuracy.stability_main).parameters["write_limits"].default is False
-    for fn in (bench.throughput, bench.main, bench_accuracy.main, bench_accuracy.stability_main):
-        assert inspect.signature(fn).parameters["out_dir"].default == "benchmarks-results", fn
+    with pytest.raises(SystemExit):
+        _build_parser().parse_args(["bench", "stability"])
+    for name in ("throughput", "accuracy", "stability_sweep"):
+        mod = _benchmark(name)
+        assert mod.build_parser().parse_args([]).out == "benchmarks-results", name
+        assert inspect.signature(mod.main).parameters["out_dir"].default == "benchmarks-results", name
+    sweep = _benchmark("stability_sweep")
+    assert "write_limits" not in inspect.signature(sweep.main).parameters
+    with pytest.raises(SystemExit):
+        sweep.build_parser().parse_args(["--write-limits"])
+    package_limits = REPO / "taichimyxo" / "stability_limits.json"
+    before = package_limits.read_bytes()
+    path = sweep.write_limits(tmp_path, {"explicit": {"1e-17/0.01": 5.0}})
+    assert path == tmp_path / "stability_limits.json" and package_limits.read_bytes() == before
+    written = json.loads(path.read_text())
+    assert written["explicit"]["1e-17/0.01"] == 5.0 and written["defaults"]["explicit"]["1e-17/0.01"] == 2.0
 
 
 # ------------------------------------------------------------------------------------------------ resume, invariants
 def test_resume_with_fewer_hours_than_done_is_refused_and_keeps_the_checkpoint(ti_cpu, tmp_path):
-    from taichimyxo.run import run_scene
+    from taichimyxo.scene_run import run_scene
     sc = Scene.load("S1", {"domain": {"width_um": 20.0, "height_um": 20.0}, "run": {"dt_ms": 1.0, "hours": 0.01},
                            "output": {"movie": False}})
     out = tmp_path / "out"
@@ -289,7 +310,7 @@ def test_forced_garbage_stops_naming_the_invariant_and_keeps_the_files(tmp_path)
 
 def test_invariant_checks_name_what_broke():
     from taichimyxo.frame import Frame
-    from taichimyxo.run import check_frame
+    from taichimyxo.writers import check_frame
     sc = build_small_scene(1)
     pos = np.zeros((1, sc.N, 2))
     pos[0, :, 0] = np.arange(sc.N) * sc.rest_length
@@ -307,7 +328,7 @@ def test_invariant_checks_name_what_broke():
 
 # ------------------------------------------------------------------------------------------------ progress, summary
 def test_progress_is_one_plain_line_per_interval_off_a_terminal():
-    from taichimyxo.run import Progress, duration
+    from taichimyxo.progress import Progress, duration
     assert [duration(s) for s in (3.61, 65, 3900, 6 * 3600)] == ["3.6 s", "1 min 05 s", "1 h 05 min", "6 h 00 min"]
     log = io.StringIO()
     bar = Progress("S3", total_steps=10_800_000, dt=0.002, start_step=0, stream=log, interval_s=3600)
@@ -333,7 +354,7 @@ def test_progress_is_one_plain_line_per_interval_off_a_terminal():
 
 def test_summary_after_resume_pairs_this_sessions_steps_with_its_wall_time(ti_cpu, tmp_path, capsys):
     from taichimyxo.cli import _print_summary
-    from taichimyxo.run import run_scene
+    from taichimyxo.scene_run import run_scene
     sc = build_small_scene(4, run={"hours": 0.001, "dt_ms": 1.0})               # 3600 steps
     out = tmp_path / "out"
     first = run_scene(sc, out_dir=out, stop_after_steps=1000, progress=False)

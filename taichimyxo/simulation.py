@@ -1,0 +1,208 @@
+"""The Simulation: a scene's state, force field (its terms) and integrator, built once, and what is measured from it.
+
+    sim = Simulation(scene)             # fields for what the scene uses, initial configuration from the scene
+    sim.run(steps, dt=None)             # advance (dt in s; the scene's step by default)
+    sim.run_for(minutes=5, writers=[])  # advance simulated time with writers attached (taichimyxo/driver.py)
+    sim.frame()                         # a Frame: numpy arrays, what writers and analysis see
+
+Composition (docs/model.md for every equation): State (state.py) holds the particles; NeighbourList
+(neighbours.py) the list and its skin check; Model (model.py) composes the units of taichimyxo/terms/ the scene turns
+on; the integrator (taichimyxo/integrators/) owns the step. Each is told at construction what the scene uses, and
+kernels branch with `ti.static`, so a disabled effect is absent from the compiled code and its fields are never
+allocated. One Simulation per process compiles its kernels once; a second instance compiles again.
+
+Determinism: every force is gathered, never scattered, over sorted neighbour lists; the only atomics are in the
+list build (sorted afterwards), the slime claim (max of cell index, a fixed rule) and flags. 1 and 2 threads give
+bit-identical runs, and a resumed run equals an uninterrupted one.
+"""
+
+import numpy as np
+import taichi as ti
+
+from .frame import Frame
+from .integrators import make_integrator, records_contacts
+from .model import Model, field_bytes, fields_of
+from .neighbours import NeighbourList, NeighbourOverflow, list_radius  # noqa: F401  (NeighbourOverflow: API)
+from .state import Layout, State, list_capacity
+
+
+class Simulation:
+    def __init__(self, scene, positions: np.ndarray | None = None, engine_direction: np.ndarray | None = None,
+                 **integrator_options):
+        """Build fields for `scene` and load the initial configuration (from the scene's start unless positions,
+        (n_cells, N, 2) µm, and engine_direction, (n_cells,) ±1, are given). integrator_options go to the
+        integrator (imex: contacts = coupled | diagonal | explicit, tol, max_iter)."""
+        self.scene = scene
+        self.layout = Layout.from_scene(scene)
+        self.step_count = 0
+        self.time_offset = 0.0      # simulated time of steps taken at another dt than the scene's, minus their share
+        self.writers = []
+        fb = ti.FieldsBuilder()
+        self.state = State(self.layout, fb)
+        head_tail = scene.guiding != "none" or scene.suppression
+        r = list_radius(scene.rest_length, scene.width, scene.guiding_range if head_tail else 0.0, scene.skin)
+        cap = scene.max_neighbours or list_capacity(r, scene.rest_length, scene.width)
+        self.neighbours = NeighbourList(self.state, fb, r, cap, scene.skin)
+        self.model = Model(scene, self.state, self.neighbours, fb,
+                           record_contacts=records_contacts(scene, **integrator_options))
+        self.integrator = make_integrator(scene, self.state, self.model, self.neighbours, fb, **integrator_options)
+        self._tree = fb.finalize()
+        if positions is None:
+            from .init import initial_configuration
+            positions, engine_direction = initial_configuration(scene)
+        self.set_state(positions, engine_direction)
+        if self.model.reversals is not None:
+            self.model.reversals.start()
+
+    # ------------------------------------------------------------------ sizes
+    @property
+    def n_p(self) -> int:
+        return self.state.n_p
+
+    @property
+    def n_s(self) -> int:
+        return self.state.n_s
+
+    @property
+    def serial(self) -> bool:
+        return self.state.serial
+
+    @property
+    def rebuilds(self) -> int:
+        return self.neighbours.rebuilds
+
+    @property
+    def time(self) -> float:
+        """Simulated time, s: the scene's steps, corrected for any steps run(n, dt) took at another dt."""
+        return self.step_count * self.layout.dt + self.time_offset
+
+    # ------------------------------------------------------------------ state
+    def set_state(self, positions, engine_direction, step: int = 0) -> None:
+        self.state.load(positions, engine_direction)
+        self.step_count = step
+        self.time_offset = 0.0
+        self.integrator.reset()
+        self.snapshot_speed()
+        self.neighbours.rebuild()
+
+    def positions(self) -> np.ndarray:
+        """(n_cells, N, 2) float64, chains unwrapped, particle 0 in the box."""
+        return self.state.positions()
+
+    def wrapped_positions(self) -> np.ndarray:
+        """(n_cells * N, 2) positions as stored: wrapped into the box, in position precision."""
+        return self.state.x.to_numpy()
+
+    def engine_direction(self) -> np.ndarray:
+        return self.state.ke.to_numpy().astype(np.int8)
+
+    def _checkpointed(self) -> dict:
+        return {**self.model.checkpoint_fields(), **self.integrator.checkpoint_fields()}
+
+    def get_checkpoint(self) -> dict:
+        st = {"x": self.state.x.to_numpy(), "x_snap": self.state.x_snap.to_numpy(), "ke": self.state.ke.to_numpy(),
+              "step": np.array(self.step_count), "snap_step": np.array(self.state.snap_step),
+              "time_offset": np.array(self.time_offset)}
+        st.update({name: f.to_numpy() for name, f in self._checkpointed().items()})
+        return st
+
+    def load_checkpoint(self, st: dict) -> None:
+        self.state.x.from_numpy(st["x"])
+        self.state.ke.from_numpy(st["ke"])
+        self.step_count = int(st["step"])
+        self.time_offset = float(st["time_offset"]) if "time_offset" in st else 0.0
+        for name, f in self._checkpointed().items():
+            f.from_numpy(st[name])
+        self.state.x_snap.from_numpy(st["x_snap"])
+        self.state.snap_step = int(st["snap_step"])
+        self.integrator.reset()
+        self.neighbours.rebuild()
+
+    # ------------------------------------------------------------------ driving
+    def run(self, n_steps: int, dt: float | None = None) -> None:
+        """Advance n_steps steps of dt seconds (the scene's step by default).
+        The neighbour list stays valid because every step checks every particle's real displacement since the list
+        was built, and the list is rebuilt as soon as one has moved half the skin: then, at every force evaluation,
+        no two particles have closed in by more than the skin since the build, whatever their speed (a guided head
+        swings at up to F_max / zeta_n ~ 32 v_b; an interval chosen for an assumed top speed is no guarantee).
+        The check costs one comparison per particle inside the step kernel, which returns the flag."""
+        dt = self.layout.dt if dt is None else dt
+        if dt != self.layout.dt:
+            self.time_offset += n_steps * (dt - self.layout.dt)
+        step = self.integrator.step
+        for _ in range(n_steps):
+            self.step_count += 1
+            if step(dt):
+                self.neighbours.rebuild()
+
+    def attach(self, writer) -> None:
+        """Attach a writer (taichimyxo.writers): run_for calls it whenever its trigger fires."""
+        self.writers.append(writer)
+
+    def run_for(self, seconds=None, minutes=None, hours=None, steps=None, writers=(), **options):
+        """Advance by simulated time (one of seconds, minutes, hours, on the scene's step grid) or steps, with the
+        attached writers and `writers` (taichimyxo.driver.drive; options: catch_signals, chunk_steps, ...). Attached
+        writers stay open for the next call and are closed by close(). Returns the driver's Run."""
+        from .driver import close_writers, drive, steps_for
+        run = drive(self, steps_for(self, seconds, minutes, hours, steps), [*self.writers, *writers], close=False,
+                    **options)
+        close_writers(writers)
+        return run
+
+    # ------------------------------------------------------------------ measurements
+    def snapshot_speed(self) -> None:
+        """Start a speed window: the displayed speed is |x(t) - x(t - window)| / window (docs/model.md)."""
+        self.state.snapshot(self.step_count)
+
+    def particle_speed(self) -> np.ndarray:
+        """(n_cells, N) µm/min averaged since the last snapshot_speed."""
+        return self.state.speed_since_snapshot(self.step_count, self.layout.dt)
+
+    def segment_strain(self) -> np.ndarray:
+        """(n_cells, N-1) strain energy in J. Only in scenes that ask for strain (output.strain)."""
+        if self.model.strain is None:
+            raise RuntimeError("strain energy is not computed in this scene (set output.strain = true)")
+        return self.model.strain.segment_strain()
+
+    def frame(self) -> Frame:
+        return Frame(time_s=self.time, step=self.step_count, box=self.scene.box, width_um=self.scene.width,
+                     positions=self.positions(), engine_direction=self.engine_direction(),
+                     particle_speed=self.particle_speed(),
+                     segment_strain=self.segment_strain() if self.model.strain is not None else None,
+                     meta={"scene": self.scene.name})
+
+    def forces(self) -> dict:
+        """Forces at the current state without stepping (Model.forces): internal, contact, total, tangent."""
+        return self.model.forces()
+
+    def solver_stats(self) -> dict:
+        return self.integrator.stats()
+
+    def reset_stats(self) -> None:
+        if hasattr(self.integrator, "reset_stats"):
+            self.integrator.reset_stats()
+
+    def allocated_fields(self) -> dict:
+        """Name -> bytes of every field this Simulation allocated (effects a scene does not use are absent)."""
+        parts = [self.state, self.neighbours, *self.model.units, self.integrator]
+        if hasattr(self.integrator, "band"):
+            parts.append(self.integrator.band)
+        out = {}
+        for part in parts:
+            out.update({k: field_bytes(f) for k, f in fields_of(part).items()})
+        return out
+
+    def close(self) -> None:
+        if self.writers:
+            from .driver import close_writers
+            close_writers(self.writers)
+            self.writers = []
+        self.model.close()
+        if self._tree is not None:
+            self._tree.destroy()
+            self._tree = None
+
+
+def make_simulation(scene, **kw) -> Simulation:
+    """The scene's Simulation (its integrator chosen by run.integrator). Kept for callers of the former API."""
+    return Simulation(scene, **kw)

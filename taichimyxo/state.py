@@ -1,0 +1,157 @@
+"""The particles and cells: positions, engine directions and the layout every unit indexes by.
+
+Layout. Particle p = c * N + k is particle k of cell c; segment s = c * (N - 1) + k joins particles k and k + 1.
+Positions are stored wrapped into the box; all differences use the minimum image. Positions are in position
+precision (f64 for 'f64' and 'mixed'), forces and offsets in force precision (f32 for 'f32' and 'mixed'): in f32 a
+200 µm coordinate resolves ~1.5e-5 µm while a cell moves ~1.3e-4 µm per 2 ms step (docs/model.md "Precision").
+"""
+
+import math
+import os
+from dataclasses import dataclass
+
+import numpy as np
+import taichi as ti
+
+from .frame import unwrap_chains
+from .geometry import min_image as np_min_image
+
+# Taichi's CPU backend spends ~75 µs launching a parallel loop; below a few thousand segments one thread running the
+# loops serially is faster than two threads (measured: benchmarks/throughput.py).
+SERIAL_BELOW_SEGMENTS = int(os.environ.get("TAICHIMYXO_SERIAL_BELOW", "3000"))
+
+
+@ti.func
+def min_image(d, Lx: ti.template(), Ly: ti.template()):
+    return ti.Vector([d[0] - Lx * ti.round(d[0] / Lx), d[1] - Ly * ti.round(d[1] / Ly)])
+
+
+@ti.func
+def perp(v):
+    return ti.Vector([-v[1], v[0]])
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Compile-time sizes and settings shared by every unit (everything else belongs to the unit that uses it)."""
+    n_cells: int
+    N: int
+    Lx: float
+    Ly: float
+    W: float              # cell width, µm: contacts, guiding gaps and the neighbour-list radius use it
+    l0: float             # rest length of a segment, µm
+    precision: str        # f32 | f64 | mixed
+    seed: int
+    dt: float             # the scene's step, s
+
+    @classmethod
+    def from_scene(cls, sc) -> "Layout":
+        return cls(n_cells=sc.n_cells, N=sc.N, Lx=sc.box[0], Ly=sc.box[1], W=sc.width, l0=sc.rest_length,
+                   precision=sc.precision, seed=sc.seed, dt=sc.dt)
+
+    @property
+    def n_particles(self) -> int:
+        return self.n_cells * self.N
+
+    @property
+    def n_segments(self) -> int:
+        return self.n_cells * (self.N - 1)
+
+
+@ti.data_oriented
+class State:
+    """Positions x (wrapped), engine directions ke = ±1 (+1: particle 0 is the head) and the speed-window snapshot."""
+
+    def __init__(self, layout: Layout, fb: ti.FieldsBuilder):
+        self.layout = L = layout
+        self.N, self.Lx, self.Ly = L.N, L.Lx, L.Ly
+        self.n_cells, self.n_p, self.n_s = L.n_cells, L.n_particles, L.n_segments
+        self.pdt = ti.f64 if L.precision in ("f64", "mixed") else ti.f32
+        self.fdt = ti.f64 if L.precision == "f64" else ti.f32
+        self.serial = self.n_s < SERIAL_BELOW_SEGMENTS
+        self.x = self.vec(fb, self.n_p, self.pdt)            # positions, wrapped
+        self.x_snap = self.vec(fb, self.n_p, self.pdt)       # positions at the start of the speed window
+        self.ke = self.scalar(fb, self.n_cells, ti.i32)      # engine direction k_e = ±1
+        self.snap_step = 0
+
+    @staticmethod
+    def vec(fb, n, dtype):
+        f = ti.Vector.field(2, dtype=dtype)
+        fb.dense(ti.i, n).place(f)
+        return f
+
+    @staticmethod
+    def scalar(fb, n, dtype):
+        f = ti.field(dtype=dtype)
+        fb.dense(ti.i, n).place(f)
+        return f
+
+    # ------------------------------------------------------------------ layout, in kernels
+    @ti.func
+    def seg_ends(self, s):
+        c = s // (self.N - 1)
+        p = c * self.N + s % (self.N - 1)
+        return p, p + 1
+
+    @ti.func
+    def mi(self, d):
+        """Minimum image of a difference vector."""
+        return min_image(d, self.Lx, self.Ly)
+
+    @ti.func
+    def seg_mid(self, s):
+        a, b = self.seg_ends(s)
+        m = self.x[a] + 0.5 * self.mi(self.x[b] - self.x[a])
+        return ti.Vector([m[0] - self.Lx * ti.floor(m[0] / self.Lx), m[1] - self.Ly * ti.floor(m[1] / self.Ly)])
+
+    @ti.func
+    def head_seg(self, c):
+        return c * (self.N - 1) + (0 if self.ke[c] > 0 else self.N - 2)
+
+    @ti.func
+    def tail_seg(self, c):
+        return c * (self.N - 1) + (self.N - 2 if self.ke[c] > 0 else 0)
+
+    @ti.func
+    def wrap(self, xn):
+        xn[0] -= self.Lx * ti.floor(xn[0] / self.Lx)
+        xn[1] -= self.Ly * ti.floor(xn[1] / self.Ly)
+        return xn
+
+    # ------------------------------------------------------------------ host side
+    def load(self, positions, engine_direction) -> None:
+        pos = np.asarray(positions, dtype=np.float64).reshape(self.n_cells, self.N, 2)
+        L = np.array([self.Lx, self.Ly])
+        self.x.from_numpy(np.mod(pos, L).reshape(-1, 2).astype(np.float64 if self.pdt == ti.f64 else np.float32))
+        self.ke.from_numpy(np.where(np.asarray(engine_direction) >= 0, 1, -1).astype(np.int32))
+
+    def positions(self) -> np.ndarray:
+        """(n_cells, N, 2) float64, chains unwrapped, particle 0 in the box."""
+        x = self.x.to_numpy().astype(np.float64).reshape(self.n_cells, self.N, 2)
+        return unwrap_chains(x, (self.Lx, self.Ly))
+
+    @ti.kernel
+    def _copy_snap(self):
+        ti.loop_config(serialize=self.serial)
+        for p in range(self.n_p):
+            self.x_snap[p] = self.x[p]
+
+    def snapshot(self, step: int) -> None:
+        self._copy_snap()
+        self.snap_step = step
+
+    def speed_since_snapshot(self, step: int, dt: float) -> np.ndarray:
+        """(n_cells, N) µm/min: displacement since the snapshot over the elapsed time (zeros if none elapsed)."""
+        steps = step - self.snap_step
+        if steps <= 0:
+            return np.zeros((self.n_cells, self.N), np.float32)
+        d = np_min_image(self.x.to_numpy().astype(np.float64) - self.x_snap.to_numpy().astype(np.float64),
+                         (self.Lx, self.Ly))
+        sp = np.sqrt((d * d).sum(-1)) / (steps * dt) * 60.0
+        return sp.reshape(self.n_cells, self.N).astype(np.float32)
+
+
+def list_capacity(radius: float, l0: float, W: float) -> int:
+    """Neighbour capacity per segment: segments whose midpoints lie within `radius` at the densest packing (area
+    fraction 1), with a margin."""
+    return int(math.ceil(1.6 * math.pi * radius * radius / (l0 * W))) + 8

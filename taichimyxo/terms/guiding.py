@@ -1,0 +1,168 @@
+"""Term 5, short-range head-to-tail guiding (docs/model.md "Force terms"), and the head-to-tail interaction that
+suppresses reversals (term 7).
+
+A follower's head within d_g of a leader's tail (gap g = distance - W, 0 < g < d_g) is pulled toward it with
+min(k_g g, F_max). Kinds: passive (only the component normal to the head's direction: the head turns, the engine
+is not helped), active (the whole pull on the head), adhesion (active, and the reaction on the leader's tail).
+Distance: 'segments' (closest points of the head and tail segments) or 'particles' (head particle to tail
+particle). The unit exists when guiding is on or reversals are suppressed; its fields are allocated per use:
+g_head (any guiding), g_tail (adhesion), interacting (suppression).
+"""
+
+import taichi as ti
+
+from ..state import perp
+
+
+@ti.func
+def closest_points(p1, q1, p2, q2):
+    """Closest points of segments p1-q1 and p2-q2: returns (s, t, c1, c2) with s, t in [0, 1]. Parallel overlapping
+    segments take the middle of the overlap (see taichimyxo/geometry.py, the numpy twin)."""
+    d1 = q1 - p1
+    d2 = q2 - p2
+    r = p1 - p2
+    a = d1.dot(d1)
+    e = d2.dot(d2)
+    f = d2.dot(r)
+    c = d1.dot(r)
+    b = d1.dot(d2)
+    eps = 1e-12
+    s = a * 0.0          # typed like the inputs (f32 or f64), not the default float
+    t = a * 0.0
+    if a > eps and e > eps:
+        denom = a * e - b * b
+        if denom > 1e-9 * a * e:
+            s = ti.math.clamp((b * f - c * e) / denom, 0.0, 1.0)
+        else:
+            t0 = ti.math.clamp(-c / a, 0.0, 1.0)
+            t1 = ti.math.clamp((b - c) / a, 0.0, 1.0)
+            s = 0.5 * (t0 + t1)
+        t = (b * s + f) / e
+        if t < 0.0:
+            t = 0.0
+            s = ti.math.clamp(-c / a, 0.0, 1.0)
+        elif t > 1.0:
+            t = 1.0
+            s = ti.math.clamp((b - c) / a, 0.0, 1.0)
+    elif a > eps:
+        s = ti.math.clamp(-c / a, 0.0, 1.0)
+    elif e > eps:
+        t = ti.math.clamp(f / e, 0.0, 1.0)
+    return s, t, p1 + d1 * s, p2 + d2 * t
+
+
+@ti.data_oriented
+class HeadToTail:
+    name = "guiding"
+
+    def __init__(self, scene, state, neighbours, fb):
+        self.state, self.nl = state, neighbours
+        self.kind = scene.guiding                         # none | passive | active | adhesion
+        self.suppression = scene.suppression
+        self.N, self.W = scene.N, scene.width
+        self.k_g, self.f_max, self.d_g = scene.k_g, scene.guiding_f_max, scene.guiding_range
+        self.particles = scene.guiding_by_particles
+        self.guide_self = scene.guiding_self
+        C = state.n_cells
+        self.g_head = state.vec(fb, C, state.fdt) if self.kind != "none" else None
+        self.g_tail = state.vec(fb, C, state.fdt) if self.kind == "adhesion" else None
+        self.interacting = state.scalar(fb, C, ti.i32) if self.suppression else None
+
+    @ti.func
+    def begin(self):
+        """Clear the interaction flags (a parallel loop, before the pair loop)."""
+        if ti.static(self.suppression):
+            ti.loop_config(serialize=self.state.serial)
+            for c in range(self.state.n_cells):
+                self.interacting[c] = 0
+
+    @ti.func
+    def pair(self, follower_seg, leader_seg):
+        """Pull on the follower's head particle toward the leader's tail, and the gap g (force zero outside
+        0 < g < d_g)."""
+        st = self.state
+        N = ti.static(self.N)
+        cj = follower_seg // (N - 1)
+        cl = leader_seg // (N - 1)
+        hj = cj * N + (0 if st.ke[cj] > 0 else N - 1)          # follower head particle
+        tl = cl * N + (N - 1 if st.ke[cl] > 0 else 0)          # leader tail particle
+        xh = st.x[hj]
+        sep = ti.Vector([0.0, 0.0], dt=st.fdt)
+        if ti.static(self.particles):
+            sep = ti.cast(st.mi(st.x[tl] - xh), st.fdt)
+        else:
+            a, b = st.seg_ends(follower_seg)
+            c_, d_ = st.seg_ends(leader_seg)
+            pa = ti.cast(st.mi(st.x[a] - xh), st.fdt)
+            pb = ti.cast(st.mi(st.x[b] - xh), st.fdt)
+            pc = ti.cast(st.mi(st.x[c_] - xh), st.fdt)
+            pd = pc + ti.cast(st.mi(st.x[d_] - st.x[c_]), st.fdt)
+            _, _, c1, c2 = closest_points(pa, pb, pc, pd)
+            sep = c2 - c1
+        d = sep.norm()
+        g = d - self.W
+        f = ti.Vector([0.0, 0.0], dt=st.fdt)
+        if g > 0.0 and g < self.d_g:
+            f = ti.min(self.k_g * g, self.f_max) * sep / d
+        return f, g
+
+    @ti.func
+    def gather_segment(self, s):
+        """The head segment gathers its cell's guiding pull, the tail segment the adhesion reaction; both set the
+        interaction flag (reversal suppression)."""
+        st = self.state
+        nl = self.nl
+        c = s // (self.N - 1)
+        is_head = s == st.head_seg(c)
+        is_tail = s == st.tail_seg(c)
+        if is_head or is_tail:
+            gh = ti.Vector([0.0, 0.0], dt=st.fdt)
+            gt = ti.Vector([0.0, 0.0], dt=st.fdt)
+            inter = 0
+            # the cell's own tail segment is not in its head segment's list when they are adjacent (N=3)
+            for q in range(nl.nbr_n[s]):
+                t = nl.nbr[s, q]
+                ct = t // (self.N - 1)
+                if ti.static(not self.guide_self):
+                    if ct == c:
+                        continue
+                if is_head and t == st.tail_seg(ct):
+                    f, g = self.pair(s, t)
+                    gh += f
+                    if g < self.d_g:
+                        inter = 1
+                if is_tail and t == st.head_seg(ct):
+                    f, g = self.pair(t, s)
+                    gt -= f
+                    if g < self.d_g:
+                        inter = 1
+            if ti.static(self.kind != "none"):
+                if is_head:
+                    self.g_head[c] = gh
+            if ti.static(self.kind == "adhesion"):
+                if is_tail:
+                    self.g_tail[c] = gt
+            if ti.static(self.suppression):
+                # head and tail segments of one cell both write: combine without a race by bit
+                ti.atomic_or(self.interacting[c], inter * (1 if is_head else 2))
+
+    @ti.func
+    def add_cell_forces(self, c, T, F):
+        """The gathered pull on cell c's head (passive: its component normal to the head's direction) and, with
+        adhesion, the reaction on its tail."""
+        if ti.static(self.kind != "none"):
+            st = self.state
+            N = ti.static(self.N)
+            head = 0 if st.ke[c] > 0 else N - 1
+            tail = N - 1 - head
+            g = self.g_head[c]
+            if ti.static(self.kind == "passive"):
+                nh = perp(ti.Vector([T[head, 0], T[head, 1]]))
+                g = g.dot(nh) * nh
+            F[head, 0] += g[0]
+            F[head, 1] += g[1]
+            if ti.static(self.kind == "adhesion"):
+                gt = self.g_tail[c]
+                F[tail, 0] += gt[0]
+                F[tail, 1] += gt[1]
+        return F

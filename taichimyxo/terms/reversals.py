@@ -1,0 +1,64 @@
+"""Term 7, reversals (docs/model.md "Force terms"): each cell reverses its engine direction (k_e -> -k_e) when its
+clock reaches its period; periods ~ Normal(T_R, sd) truncated below, initial phases uniform, drawn from a
+counter-based random stream (taichimyxo/rng.py), so runs are reproducible on any number of threads. With
+suppression, a cell in a head-to-tail interaction this step does not reverse; its clock restarts. Clocks are
+integers (steps): exact over hours."""
+
+import math
+
+import taichi as ti
+
+from ..rng import STREAM_REVERSAL, uniform_ti
+
+
+@ti.data_oriented
+class Reversals:
+    name = "reversals"
+
+    def __init__(self, scene, state, fb, head_tail=None):
+        self.state = state
+        self.seed = scene.seed
+        T = scene.reversal_period_s / scene.dt
+        self.period_mean_steps = T
+        self.period_sd_steps = T * scene.reversal_sd_fraction
+        self.period_min_steps = max(1.0, T * scene.reversal_min_fraction)
+        self.head_tail = head_tail if scene.suppression else None
+        self.suppressed = self.head_tail is not None
+        C = state.n_cells
+        self.rev_clock = state.scalar(fb, C, ti.i32)      # steps since the last reversal
+        self.rev_period = state.scalar(fb, C, ti.i32)     # this cycle's period, steps
+        self.rev_count = state.scalar(fb, C, ti.i32)      # reversals so far (counter of the random stream)
+
+    @ti.func
+    def draw_period(self, c, count):
+        u1 = uniform_ti(ti.u32(self.seed), ti.u32(STREAM_REVERSAL), ti.u32(c), ti.u32(2 * count))
+        u2 = uniform_ti(ti.u32(self.seed), ti.u32(STREAM_REVERSAL), ti.u32(c), ti.u32(2 * count + 1))
+        z = ti.sqrt(-2.0 * ti.log(u1)) * ti.cos(2.0 * math.pi * u2)
+        p = self.period_mean_steps + self.period_sd_steps * z
+        return ti.cast(ti.max(p, self.period_min_steps), ti.i32)
+
+    @ti.kernel
+    def start(self):
+        """Periods drawn, initial phases uniform."""
+        ti.loop_config(serialize=self.state.serial)
+        for c in range(self.state.n_cells):
+            p = self.draw_period(c, 0)
+            u = uniform_ti(ti.u32(self.seed), ti.u32(STREAM_REVERSAL + 100), ti.u32(c), ti.u32(0))
+            self.rev_period[c] = p
+            self.rev_clock[c] = ti.cast(u * p, ti.i32)
+            self.rev_count[c] = 0
+
+    @ti.func
+    def advance(self, c):
+        """Advance cell c's clock; reverse when it reaches the period, unless suppressed."""
+        st = self.state
+        self.rev_clock[c] += 1
+        if self.rev_clock[c] >= self.rev_period[c]:
+            self.rev_clock[c] = 0
+            skip = False
+            if ti.static(self.suppressed):
+                skip = self.head_tail.interacting[c] != 0
+            if not skip:
+                st.ke[c] = -st.ke[c]
+                self.rev_count[c] += 1
+                self.rev_period[c] = self.draw_period(c, self.rev_count[c])
