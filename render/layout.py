@@ -106,11 +106,11 @@ def font_size_px(size) -> float:
     return max(FONT_PX_AT_1080 * min(W, H) / 1080.0, min(MIN_FONT_PX, H / 16.0))
 
 
-def _glyph_width(font_px: float) -> int:
+def glyph_width(font_px: float) -> int:
     return int(math.ceil(0.62 * font_px))
 
 
-def _legend_metrics(scale, f: float):
+def legend_metrics(scale, f: float):
     """(minimum bar width, left overhang, right overhang, block height) of the legend for tick font f px."""
     labels = list(scale.tick_labels)
     pos = np.asarray(scale.tick_positions(), float) if labels else np.zeros(0)
@@ -170,9 +170,9 @@ def compute_layout(size: tuple[int, int], box: tuple[float, float], decorations:
         return Layout(fsize, vp, g, None, None, 0.0, None, None, f, 0, "center", (W, H))
 
     scale = make_scale("speed") if scale is None else scale
-    cb_min, ov_l, ov_r, leg_h, cb_h = _legend_metrics(scale, f)
+    cb_min, ov_l, ov_r, leg_h, cb_h = legend_metrics(scale, f)
     gap_top = round(0.5 * f)
-    time_w = len(LONGEST_TIME) * _glyph_width(TIME_FONT * f)
+    time_w = len(LONGEST_TIME) * glyph_width(TIME_FONT * f)
     time_h = 1.25 * TIME_FONT * f
     sb_um = nice_scalebar_length(Lx)
     sb_label = f"{sb_um:g} µm"

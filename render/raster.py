@@ -47,7 +47,7 @@ import numpy as np
 from .capsules import OUTLINE_RGB, auto_outline, draw_capsules, periodic_copies  # noqa: F401
 from .colors import SPEED_MAX_UM_PER_MIN, make_scale
 from .layout import (FONT_PX_AT_1080, LONGEST_TIME, MIN_FONT_PX, TIME_FONT, Layout, Viewport,  # noqa: F401
-                     _glyph_width, _legend_metrics, compute_layout, font_size_px, nice_scalebar_length, text_extent)
+                     glyph_width, legend_metrics, compute_layout, font_size_px, nice_scalebar_length, text_extent)
 
 BACKGROUNDS = {
     "white": ((255, 255, 255), (0, 0, 0), (170, 170, 170)),   # background, text, box outline
@@ -66,7 +66,7 @@ class GlyphAtlas:
         from matplotlib.figure import Figure
 
         self.font_px = font_px
-        cw = _glyph_width(font_px)
+        cw = glyph_width(font_px)
         ch = int(math.ceil(1.25 * font_px))
         fig = Figure(figsize=(cw * len(chars) / 100.0, ch / 100.0), dpi=100)
         canvas = FigureCanvasAgg(fig)

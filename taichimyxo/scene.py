@@ -10,56 +10,19 @@ from __future__ import annotations
 
 import copy
 import json
-import os
 import tomllib
 from dataclasses import dataclass, field
-from pathlib import Path
 
 # the schema (every key, its default and check) and its errors; re-exported: `from taichimyxo.scene import SCHEMA`
 from .schema import (SCHEMA, STIFFNESS_NAMES, SceneError, defaults, merge, parse_set,  # noqa: F401
                      to_toml, toml_value)
+from .catalogue import SCENES_DIR, available_scenes, resolve_path  # noqa: F401  (re-exported)
 from .stability import default_dt_ms
 
-
-def _scenes_dir() -> Path:
-    """Where the scene files are: inside the package in an installed wheel (pyproject.toml maps scenes/ to
-    taichimyxo/scenes), at the top of the clone otherwise (also for an editable install)."""
-    here = Path(__file__).resolve().parent
-    for d in (here / "scenes", here.parent / "scenes"):
-        if d.is_dir() and any(d.glob("*.toml")):
-            return d
-    return here / "scenes"
-
-
-SCENES_DIR = _scenes_dir()
 
 # The densest random start placed reliably and in bounded time (init.py, "Random sequential placement": above
 # 0.40 the tries per cell climb from hundreds to thousands, and past 0.44 placement stalls).
 RANDOM_MAX_AREA_FRACTION = 0.40
-
-
-def available_scenes() -> list[str]:
-    if not SCENES_DIR.is_dir():
-        return []
-    return sorted((p.stem for p in SCENES_DIR.glob("*.toml")), key=_scene_sort_key)
-
-
-def _scene_sort_key(name: str):
-    import re
-    m = re.match(r"S(\d+)(.*)", name)
-    return (0, int(m.group(1)), m.group(2)) if m else (1, 0, name)
-
-
-def resolve_path(name_or_path: str) -> Path:
-    p = Path(name_or_path)
-    if p.suffix == ".toml" or os.sep in name_or_path:
-        if not p.is_file():
-            raise SceneError(f"scene file {name_or_path} not found")
-        return p
-    cand = SCENES_DIR / f"{name_or_path}.toml"
-    if not cand.is_file():
-        raise SceneError(f"unknown scene {name_or_path!r}; available: {', '.join(available_scenes())}")
-    return cand
 
 
 @dataclass(frozen=True)

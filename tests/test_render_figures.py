@@ -13,7 +13,7 @@ from taichimyxo.frame import Frame
 from taichimyxo.render import (PNG_SIZE, VideoWriter, compute_layout, frame_size, make_scale, render_frame,
                                render_trajectory, verify_video, write_png)
 from taichimyxo.render.colors import POLARITY_RGB, identity_colors
-from taichimyxo.render.raster import (LONGEST_TIME, TIME_FONT, _glyph_width, _legend_metrics, cell_axis_angle_deg,
+from taichimyxo.render.raster import (LONGEST_TIME, TIME_FONT, glyph_width, legend_metrics, cell_axis_angle_deg,
                                       get_renderer, text_extent)
 
 TURBO = matplotlib.colormaps["turbo"]
@@ -126,10 +126,10 @@ def test_legend_time_and_scale_bar_do_not_overlap(color, size, box):
     lay = compute_layout(size, box, True, scale=sc, title="S10")
     W, H = lay.size
     f = lay.font_px
-    cb_min, ov_l, ov_r, leg_h, cb_h = _legend_metrics(sc, f)
+    cb_min, ov_l, ov_r, leg_h, cb_h = legend_metrics(sc, f)
     r0, r1, c0, c1 = lay.colorbar
     legend = (r0, r0 + leg_h, c0 - ov_l, c1 + ov_r)
-    tw = len(LONGEST_TIME) * _glyph_width(TIME_FONT * f)
+    tw = len(LONGEST_TIME) * glyph_width(TIME_FONT * f)
     th = 1.25 * TIME_FONT * f
     tr, tc = lay.time_center
     tl = tc - tw / 2 if lay.time_align == "center" else tc
