@@ -23,6 +23,8 @@ class Frame:
     engine_direction: np.ndarray    # (n_cells,) int8, +1: particle 0 is the head, -1: particle N-1 is the head
     particle_speed: np.ndarray      # (n_cells, N) float32, µm/min, averaged over docs/model.md's short window
     segment_strain: np.ndarray | None = None   # (n_cells, N-1) float64, J, or None when not computed
+    particle_velocity: np.ndarray | None = None  # (n_cells, N, 2) float32 µm/min over the same window as the
+                                                 # speed (its norm), or None where not recorded
     meta: dict = field(default_factory=dict)   # scene name etc., free-form
 
     @property

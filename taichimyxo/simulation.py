@@ -158,6 +158,11 @@ class Simulation:
         """(n_cells, N) µm/min averaged since the last snapshot_speed."""
         return self.state.speed_since_snapshot(self.step_count, self.layout.dt)
 
+    def particle_velocity(self) -> np.ndarray:
+        """(n_cells, N, 2) µm/min averaged since the last snapshot_speed (the vectors whose norms particle_speed
+        gives: what a rotation is fitted to)."""
+        return self.state.velocity_since_snapshot(self.step_count, self.layout.dt)
+
     def segment_strain(self) -> np.ndarray:
         """(n_cells, N-1) strain energy in J. Only in scenes that ask for strain (output.strain)."""
         if self.model.strain is None:
@@ -167,7 +172,7 @@ class Simulation:
     def frame(self) -> Frame:
         return Frame(time_s=self.time, step=self.step_count, box=self.scene.box, width_um=self.scene.width,
                      positions=self.positions(), engine_direction=self.engine_direction(),
-                     particle_speed=self.particle_speed(),
+                     particle_speed=self.particle_speed(), particle_velocity=self.particle_velocity(),
                      segment_strain=self.segment_strain() if self.model.strain is not None else None,
                      meta={"scene": self.scene.name})
 

@@ -140,15 +140,30 @@ class State:
         self._copy_snap()
         self.snap_step = step
 
-    def speed_since_snapshot(self, step: int, dt: float) -> np.ndarray:
-        """(n_cells, N) µm/min: displacement since the snapshot over the elapsed time (zeros if none elapsed)."""
+    def _window(self, step: int, dt: float):
+        """Displacement (n_p, 2) f64 since the snapshot and the elapsed time, s (None if none elapsed)."""
         steps = step - self.snap_step
         if steps <= 0:
-            return np.zeros((self.n_cells, self.N), np.float32)
+            return None, 0.0
         d = np_min_image(self.x.to_numpy().astype(np.float64) - self.x_snap.to_numpy().astype(np.float64),
                          (self.Lx, self.Ly))
-        sp = np.sqrt((d * d).sum(-1)) / (steps * dt) * 60.0
+        return d, steps * dt
+
+    def speed_since_snapshot(self, step: int, dt: float) -> np.ndarray:
+        """(n_cells, N) µm/min: displacement since the snapshot over the elapsed time (zeros if none elapsed)."""
+        d, t = self._window(step, dt)
+        if d is None:
+            return np.zeros((self.n_cells, self.N), np.float32)
+        sp = np.sqrt((d * d).sum(-1)) / t * 60.0
         return sp.reshape(self.n_cells, self.N).astype(np.float32)
+
+    def velocity_since_snapshot(self, step: int, dt: float) -> np.ndarray:
+        """(n_cells, N, 2) µm/min: the displacement vector since the snapshot over the elapsed time (the speed is
+        its norm; zeros if none elapsed)."""
+        d, t = self._window(step, dt)
+        if d is None:
+            return np.zeros((self.n_cells, self.N, 2), np.float32)
+        return (d / t * 60.0).reshape(self.n_cells, self.N, 2).astype(np.float32)
 
 
 def list_capacity(radius: float, l0: float, W: float) -> int:

@@ -8,6 +8,8 @@ Schema (see README "Trajectory format"):
   particles.types = ["pole", "body"]: the two end particles of each cell are "pole".
 - bonds.group (Nb, 2): the segments, (i, i+1) within each cell; bonds.types = ["segment"]. Given in every frame
   (gsd stores them once, in frame 0, and later frames inherit them, as the HOOMD schema defines).
+- particles.velocity (Np, 3) float32, µm/min (z = 0): displacement over the speed window (the same window as the
+  speed below, whose value is its norm); absent in frame 0, where the window is empty, and in older files.
 - log/particles/speed_um_per_min (Np,) float32: particle speed averaged over the speed window (docs/model.md).
 - log/particles/engine_direction (Np,) int8: the cell's k_e (+1: particle 0 of the cell is the head).
 - log/bonds/strain_energy_J (Nb,) float32: per-segment strain energy, only when the scene asks for it.
@@ -80,6 +82,10 @@ class TrajectoryWriter:
         tid[:, -1] = 0
         g.particles.typeid = tid.reshape(-1)
         g.particles.diameter = np.full(Np, fr.width_um, np.float32)
+        if fr.particle_velocity is not None:
+            v3 = np.zeros((Np, 3), np.float32)
+            v3[:, :2] = np.asarray(fr.particle_velocity, np.float32).reshape(Np, 2)
+            g.particles.velocity = v3
         # the bonds in every frame: a frame without them would store bonds.N = 0 and readers (OVITO, freud,
         # MDAnalysis) would show none after frame 0. gsd.hoomd writes a chunk only where it differs from frame 0,
         # so later frames inherit frame 0's bonds, as the HOOMD schema defines, at no cost in file size.
@@ -168,7 +174,7 @@ def read_scene(path: str) -> dict:
         return json.loads(bytes(np.asarray(raw, np.uint8)).decode()) if raw is not None else {}
 
 
-def _frame_from_gsd(g, N: int, width: float, meta: dict) -> Frame:
+def _frame_from_gsd(g, N: int, width: float, meta: dict, has_velocity: bool = False) -> Frame:
     L = np.array(g.configuration.box[:2], dtype=np.float64)
     Np = int(g.particles.N)
     pos = g.particles.position[:, :2].astype(np.float64) + g.particles.image[:, :2] * L + L / 2
@@ -178,12 +184,16 @@ def _frame_from_gsd(g, N: int, width: float, meta: dict) -> Frame:
     spd = np.zeros((n_cells, N), np.float32) if spd is None else np.asarray(spd, np.float32).reshape(n_cells, N)
     ke = g.log.get("particles/engine_direction")
     ke = np.ones(n_cells, np.int8) if ke is None else np.asarray(ke, np.int8).reshape(n_cells, N)[:, 0].copy()
+    vel = None
+    if has_velocity:
+        vel = np.asarray(g.particles.velocity, np.float32)[:, :2].reshape(n_cells, N, 2).copy()
     st = g.log.get("bonds/strain_energy_J")
     st = None if st is None else np.asarray(st, np.float64).reshape(n_cells, N - 1)
     t = g.log.get("taichimyxo/time_s")
     t = float(np.asarray(t).reshape(-1)[0]) if t is not None else float(g.configuration.step)
     return Frame(time_s=t, step=int(g.configuration.step), box=(float(L[0]), float(L[1])), width_um=width,
-                 positions=pos, engine_direction=ke, particle_speed=spd, segment_strain=st, meta=meta)
+                 positions=pos, engine_direction=ke, particle_speed=spd, segment_strain=st, meta=meta,
+                 particle_velocity=vel)
 
 
 def count_frames(path: str) -> int:
@@ -201,7 +211,10 @@ def read_frames(path: str, every: int = 1, start: int = 0) -> Iterator[Frame]:
         N = int(meta.get("cell", {}).get("particles", 0)) or _guess_chain_length(t[0])
         width = float(meta.get("_width_um", meta.get("cell", {}).get("width_um", 0.5)))
         for i in range(start, len(t), max(1, every)):
-            yield _frame_from_gsd(t[i], N, width, meta)
+            # a frame stores velocity unless it is the default (zero); a later frame without the chunk inherits
+            # frame 0's, as the HOOMD schema defines (gsd.hoomd returns it)
+            has_v = any(t.file.chunk_exists(frame=j, name="particles/velocity") for j in (i, 0))
+            yield _frame_from_gsd(t[i], N, width, meta, has_velocity=has_v)
 
 
 def _guess_chain_length(g) -> int:

@@ -60,6 +60,29 @@ def run_with_movie(tmp_path_factory):
     return sc, out, summary
 
 
+def test_velocities_are_stored_and_their_norms_are_the_speeds(run_with_movie):
+    """particles/velocity (µm/min, HOOMD schema) in every frame after the first: the displacement over the speed
+    window, whose norm is log/particles/speed_um_per_min, and what the frames read back carry."""
+    import gsd.hoomd
+    from taichimyxo.trajectory import read_frames
+    sc, out, _ = run_with_movie
+    path = out / f"{sc.name}.gsd"
+    frames = list(read_frames(str(path)))
+    assert frames[0].particle_velocity is None                     # frame 0: the window is empty
+    with gsd.hoomd.open(str(path), "r") as t:
+        for i in range(1, len(t)):
+            v = np.asarray(t[i].particles.velocity)
+            speed = np.asarray(t[i].log["particles/speed_um_per_min"])
+            assert np.all(v[:, 2] == 0) and np.abs(v).max() > 0
+            np.testing.assert_allclose(np.linalg.norm(v[:, :2], axis=1), speed, rtol=1e-5, atol=1e-6)
+            fr = frames[i]
+            np.testing.assert_array_equal(fr.particle_velocity.reshape(-1, 2), v[:, :2])
+            # the direction is the cells' motion: mostly along their engine direction
+            head_to_tail = fr.positions[:, -1] - fr.positions[:, 0]
+            along = -np.sum(fr.particle_velocity.mean(1) * head_to_tail, axis=1) * fr.engine_direction
+            assert np.mean(along > 0) > 0.5
+
+
 def test_every_frame_has_the_bonds(run_with_movie):
     import gsd.fl
     import gsd.hoomd
