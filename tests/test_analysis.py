@@ -65,6 +65,27 @@ def test_exact_disk_numbers_and_clockwise():
     assert a["radius_um"] == pytest.approx(8.25, rel=0.02)
 
 
+def test_rigid_rotation_fitted_to_velocities():
+    """With velocities in the frame (particles/velocity), each aggregate carries a fit of v = omega x (r - c):
+    a rigidly turning disk gives its omega, its centre (here across the periodic edge) and R^2 = 1; without
+    velocities there is no fit."""
+    from taichimyxo.analysis.stats import rigid_rotation_fit
+    disk = dict(centre=(99.0, 50.0), radius=8.25, omega=-0.9)
+    fr = next(synthetic_frames(box=(100.0, 100.0), disks=[disk]))
+    assert "rotation_fit" not in find_aggregates(fr, v_b=V_B)[0]
+    r = min_image(fr.positions - np.array(disk["centre"]), fr.box)
+    fr.particle_velocity = (-0.9 * np.stack([-r[..., 1], r[..., 0]], axis=-1)).astype(np.float32)
+    (a,) = find_aggregates(fr, v_b=V_B)
+    fit = a["rotation_fit"]
+    assert fit["omega_rad_per_min"] == pytest.approx(-0.9, rel=1e-4)
+    assert fit["r2"] == pytest.approx(1.0, abs=1e-6)
+    assert _pdist(fit["centre_um"], disk["centre"], (100, 100)) < 1e-3
+    # a translation is no rotation: R^2 ~ 0 for noise around a uniform velocity
+    rng = np.random.default_rng(1)
+    pts = rng.uniform(-5, 5, (200, 2))
+    assert rigid_rotation_fit(pts, np.array([3.0, 1.0]) + 0.1 * rng.normal(size=(200, 2)))["r2"] < 0.1
+
+
 def test_straight_stream_is_no_aggregate(tmp_path):
     s = _run(tmp_path, streams=[dict(origin=(10.0, 20.0), angle=0.4, rows=10, per_row=14, speed=V_B)])
     assert s["timeseries"]["n_aggregates"] == [0, 0, 0]

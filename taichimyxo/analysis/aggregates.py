@@ -48,7 +48,7 @@ from ..geometry import min_image
 from .cells import CellGeometry
 from .clusters import cell_clusters
 from .params import R_BINS, fill_cell_defaults, parameters
-from .stats import binom_tail, ols
+from .stats import binom_tail, ols, rigid_rotation_fit
 
 
 def _hough_candidates(geo: CellGeometry, voters: np.ndarray, P: dict, Lam: float):
@@ -226,6 +226,13 @@ def _measure(geo: CellGeometry, c: np.ndarray, sense: int, info: dict, P: dict, 
         mean_speed_um_per_min=float(geo.cspeed[mem].mean()), fraction_circulating=info["f_circ"],
         octants=info["n_octants"], p_value=info["p_value"],
     )
+    if geo.pvel is not None:
+        # v = omega x (r - c) fitted to the members' particle velocities (positions relative to the detected
+        # centre, unwrapped): the rotation's own centre, rate and how rigid it is (R^2)
+        fit = rigid_rotation_fit(rpf, geo.pvel[mem].reshape(-1, 2))
+        cen = np.mod(np.asarray(c, float) + np.nan_to_num(np.asarray(fit["centre"])), geo.L)
+        out["rotation_fit"] = dict(omega_rad_per_min=fit["omega"], r2=fit["r2"],
+                                   centre_um=[float(x) for x in cen] if math.isfinite(fit["omega"]) else None)
     # pooled profiles (not written per aggregate)
     out["_speed_prof"] = _profile(rpn / R, sp / v_b)
     out["_scatter"] = (rpn, sp)

@@ -43,3 +43,6 @@ class CellGeometry:
         self.pspeed = np.asarray(fr.particle_speed, float).reshape(self.n, self.N)
         self.cspeed = self.pspeed.mean(axis=1)
         self.strain = None if fr.segment_strain is None else np.asarray(fr.segment_strain, float)
+        # windowed particle velocities (µm/min) where the trajectory stores them: a rotation is fitted to vectors
+        self.pvel = (None if getattr(fr, "particle_velocity", None) is None
+                     else np.asarray(fr.particle_velocity, float).reshape(self.n, self.N, 2))

@@ -1,4 +1,4 @@
-"""The two statistics the analysis needs: ordinary least squares and a binomial tail."""
+"""The statistics the analysis needs: ordinary least squares, a rigid-rotation fit and a binomial tail."""
 from __future__ import annotations
 
 import math
@@ -39,3 +39,28 @@ def binom_tail(k: int, n: int, p: float) -> float:
           for i in range(k, n + 1)]
     m = max(lg)
     return min(1.0, math.exp(m) * sum(math.exp(x - m) for x in lg))
+
+
+def rigid_rotation_fit(r, v):
+    """Least-squares fit of v = omega x (r - c) in 2D (omega x (x, y) = (-omega y, omega x)) to points r (n, 2) and
+    velocities v (n, 2): linear in (omega, omega c_y, -omega c_x), solved by numpy's lstsq. Returns dict(omega,
+    centre (2,) in r's frame, r2 = 1 - SSR / sum |v - mean v|^2, n); NaN where undefined (fewer than 3 points,
+    or no rotation)."""
+    r = np.asarray(r, float).reshape(-1, 2)
+    v = np.asarray(v, float).reshape(-1, 2)
+    n = len(r)
+    out = dict(omega=float("nan"), centre=[float("nan")] * 2, r2=float("nan"), n=n)
+    if n < 3:
+        return out
+    A = np.zeros((2 * n, 3))
+    A[:n, 0], A[:n, 1] = -r[:, 1], 1.0            # v_x = -omega y + omega c_y
+    A[n:, 0], A[n:, 2] = r[:, 0], 1.0             # v_y =  omega x - omega c_x
+    b = np.concatenate([v[:, 0], v[:, 1]])
+    (omega, a, bb), *_ = np.linalg.lstsq(A, b, rcond=None)
+    res = b - A @ np.array([omega, a, bb])
+    sst = float(((v - v.mean(0)) ** 2).sum())
+    out["r2"] = 1.0 - float((res ** 2).sum()) / sst if sst > 0 else float("nan")
+    if abs(omega) > 1e-12:
+        out["omega"] = float(omega)
+        out["centre"] = [float(-bb / omega), float(a / omega)]
+    return out
