@@ -21,12 +21,12 @@ import sys
 import time
 from pathlib import Path
 
-from .driver import InvariantBroken, drive  # noqa: F401  (InvariantBroken: part of this module's interface)
-from .progress import Progress, duration  # noqa: F401
+from .driver import drive
+from .progress import duration
 from .scene import Scene, SceneError
 from .triggers import Periodic, WallClock
-from .writers import (SUMMARY_VERSION, Checkpoint, FigurePanel, InvariantCheck, Movie, ProgressLine,  # noqa: F401
-                      Summary, Trajectory, check_frame, check_positions, read_checkpoint, scene_render_options)
+from .writers import (SUMMARY_VERSION, Checkpoint, FigurePanel, InvariantCheck, Movie, ProgressLine, Summary,
+                      Trajectory, read_checkpoint, scene_render_options)
 
 
 class OutputError(SceneError):
