@@ -3,16 +3,15 @@
 A scene's effects decide which units exist (`Model.units`); the kernels iterate over them with `ti.static`, so an
 effect a scene does not use is neither compiled nor allocated. The integrators (taichimyxo/integrators/) call, in
 one fused kernel per step:
-    begin()             parallel loop: clear per-step flags (reversal suppression)
-    pairs()             parallel loop over segments: every pair term gathers onto its segment (contacts; head and
-                        tail segments also gather guiding)
+    pairs()             parallel loop over segments: each contact pair evaluated once by its lower segment; head
+                        and tail segments gather guiding from their own short list
     cell_forces(c)      per cell, in its own frame: internal terms (springs, bending), engine, then the per-cell
                         terms (contacts gathered, guiding, slime)
     after_move(c, m)    per cell after its particles moved: neighbour-list flag, slime claim or reversal clock
     deposit(c)          per cell, a last loop when slime is on: the slime write, then the reversal clock
 
 Adding a force law: write its unit in taichimyxo/terms/ (parameters from the scene, fields, `add_cell_forces` or
-`gather_segment`, numpy energy, stiffness if stiff) and list it in `Model.__init__`.
+`pair_pass`, numpy energy, stiffness if stiff) and list it in `Model.__init__`.
 """
 
 import numpy as np
@@ -55,17 +54,12 @@ class Model:
 
     # ------------------------------------------------------------------ in kernels
     @ti.func
-    def begin(self):
-        if ti.static(self.has_guiding):
-            self.guiding.begin()
-
-    @ti.func
     def pairs(self):
         st = self.state
         ti.loop_config(serialize=st.serial)
         for s in range(st.n_s):
             for u in ti.static(self.pair_terms):
-                u.gather_segment(s)
+                u.pair_pass(s)
 
     @ti.func
     def geometry(self, c):
@@ -124,7 +118,6 @@ class Model:
     @ti.kernel
     def _evaluate(self, f_int: ti.template(), f_tot: ti.template(), tan: ti.template()):
         st = self.state
-        self.begin()
         self.pairs()
         ti.loop_config(serialize=st.serial)
         for c in range(st.n_cells):
@@ -152,6 +145,7 @@ class Model:
                 "contact": self.contacts.per_particle(), "tangent": tan.to_numpy().reshape(sh)}
 
     def close(self) -> None:
+        self.contacts.close()
         if getattr(self, "_out", None) is not None:
             self._out[3].destroy()
             self._out = None

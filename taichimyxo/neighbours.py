@@ -1,63 +1,125 @@
-"""The neighbour list: for each segment, the segments whose midpoints are within the list radius, built from a cell
-grid and sorted, and the skin check that says when to rebuild it.
+"""The neighbour lists, built together from one cell grid, and the skin check that says when to rebuild them.
 
-Determinism: the build counts into bins with atomics, but each segment's list is sorted afterwards, so the list and
-every force summed over it are independent of thread scheduling.
+  contact list  for each segment, the segments whose closest points (minimum image) are within W + skin: every pair
+                that can touch before the next rebuild. Sorted; for a partner t < s, `rev` holds where s sits in t's
+                row, so a contact pair is evaluated once (by its lower segment) and gathered by both (terms/contacts).
+  guiding list  only when head-to-tail guiding or reversal suppression is on: for each cell end (row 2c for the end
+                segment at particle 0, 2c + 1 at particle N - 1), the other cells' end segments within
+                W + d_g + skin. Head and tail swap on a reversal; both ends are listed, so the list stays valid.
+
+Why true segment distance, not midpoint distance: a list by midpoints (radius 1.25 l0 + W + d_g + skin = 1.85 µm
+for the default cell) held about 33 partners per segment at area fraction 1, while fewer than half can touch; every
+step walked them all, twice. Validity: the list is rebuilt as soon as any particle has moved half the skin since the
+build (`store` returns the flag inside the step), so no two points of two segments have closed in by a full skin,
+whatever the speed; a pair farther apart than W + skin at the build cannot touch before the next one.
+
+Determinism: the build counts into bins with atomics, but each row is sorted afterwards, so the lists and every sum
+over them are independent of thread scheduling.
 """
 
 import taichi as ti
 
-from .state import State
+from .state import SEGMENT_LENGTH_TOL, State, closest_points
+
+# the grid holds segments up to 1.5 l0, the bound frames check too: a longer one (a blown-up chain) could escape
+# the 3 x 3 bins searched, so the build stops the run with the invariant's message
+LENGTH_BOUND = 1.0 + SEGMENT_LENGTH_TOL
 
 
 class NeighbourOverflow(RuntimeError):
     pass
 
 
-def list_radius(l0: float, W: float, d_g: float, skin: float) -> float:
-    """Two segments no longer than l_max = 1.25 l0 whose closest points are within W + d_g have midpoints within
-    l_max + W + d_g; the skin covers motion between rebuilds."""
-    return 1.25 * l0 + W + d_g + skin
+def grid_radius(l0: float, cutoff: float) -> float:
+    """Two segments no longer than l_max = 1.5 l0 whose closest points are within `cutoff` have midpoints within
+    l_max + cutoff: the grid's bins are at least that wide, so a 3 x 3 block of bins holds every candidate."""
+    return LENGTH_BOUND * l0 + cutoff
 
 
 @ti.data_oriented
 class NeighbourList:
-    def __init__(self, state: State, fb: ti.FieldsBuilder, radius: float, capacity: int, skin: float):
+    def __init__(self, state: State, fb: ti.FieldsBuilder, W: float, skin: float, capacity: int,
+                 guiding_range: float | None = None, guiding_capacity: int = 0):
         self.state = st = state
-        self.radius, self.max_nbrs, self.skin = radius, capacity, skin
-        self.nbx = max(1, int(st.Lx // radius))
-        self.nby = max(1, int(st.Ly // radius))
+        self.W, self.skin, self.max_nbrs = W, skin, capacity
+        self.contact_cutoff = W + skin
+        self.guiding = guiding_range is not None
+        self.guiding_cutoff = W + guiding_range + skin if self.guiding else 0.0
+        self.max_guides = guiding_capacity
+        self.l_max = LENGTH_BOUND * st.layout.l0
+        self.radius = grid_radius(st.layout.l0, max(self.contact_cutoff, self.guiding_cutoff))
+        self.nbx = max(1, int(st.Lx // self.radius))
+        self.nby = max(1, int(st.Ly // self.radius))
         nb = self.nbx * self.nby
         S = st.n_s
         self.x_ref = st.vec(fb, st.n_p, st.pdt)            # positions at the last build
-        self.nbr = ti.field(ti.i32)
-        fb.dense(ti.ij, (S, capacity)).place(self.nbr)
+        self.nbr = ti.field(ti.i32)                         # contact partners, sorted
+        self.rev = ti.field(ti.i32)                         # for a partner t < s: the slot of s in t's row
+        fb.dense(ti.ij, (S, capacity)).place(self.nbr, self.rev)
         self.nbr_n = st.scalar(fb, S, ti.i32)
+        if self.guiding:
+            self.guide = ti.field(ti.i32)                   # per cell end: other cells' end segments, sorted
+            fb.dense(ti.ij, (2 * st.n_cells, guiding_capacity)).place(self.guide)
+            self.guide_n = st.scalar(fb, 2 * st.n_cells, ti.i32)
+        else:
+            self.guide = self.guide_n = None
         self.bin_count = st.scalar(fb, nb, ti.i32)
         self.bin_start = st.scalar(fb, nb + 1, ti.i32)
         self.bin_cursor = st.scalar(fb, nb, ti.i32)
         self.bin_items = st.scalar(fb, S, ti.i32)
         self.seg_bin = st.scalar(fb, S, ti.i32)
-        self.flags = st.scalar(fb, 4, ti.i32)               # 0: overflow, 1: a particle moved past half the skin
+        # 0: contact list overflow, 1: a particle moved past half the skin, 2: guiding list overflow,
+        # 3: a segment longer than l_max
+        self.flags = st.scalar(fb, 4, ti.i32)
         self.rebuilds = 0
+
+    @ti.func
+    def seg_distance(self, s, t):
+        """Distance between segments s and t (closest points, minimum image), in t's frame relative to s's first
+        particle, force precision."""
+        st = self.state
+        a, b = st.seg_ends(s)
+        c_, d_ = st.seg_ends(t)
+        pb = ti.cast(st.mi(st.x[b] - st.x[a]), st.fdt)
+        pc = ti.cast(st.mi(st.x[c_] - st.x[a]), st.fdt)
+        pd = pc + ti.cast(st.mi(st.x[d_] - st.x[c_]), st.fdt)
+        _, _, c1, c2 = closest_points(pb * 0.0, pb, pc, pd)
+        return (c2 - c1).norm()
+
+    @ti.func
+    def _sort_row(self, f: ti.template(), r, n):
+        """Insertion sort of row r (n entries): the list, and so every force sum, is independent of scheduling."""
+        for i in range(1, n):
+            v = f[r, i]
+            j = i - 1
+            while j >= 0 and f[r, j] > v:
+                f[r, j + 1] = f[r, j]
+                j -= 1
+            f[r, j + 1] = v
 
     @ti.kernel
     def _build(self):
         st = self.state
         N = ti.static(st.N)
         nbx, nby = ti.static(self.nbx, self.nby)
-        r2 = ti.static(self.radius ** 2)
+        cut_c = ti.static(self.contact_cutoff * 1.001)       # a margin far above rounding
+        cut_g = ti.static(self.guiding_cutoff * 1.001)
+        l_max = ti.static(self.l_max)
         ti.loop_config(serialize=st.serial)
         for i in range(nbx * nby):
             self.bin_count[i] = 0
         ti.loop_config(serialize=st.serial)
         for s in range(st.n_s):
             m = st.seg_mid(s)
+            a, b = st.seg_ends(s)
+            e = st.mi(st.x[b] - st.x[a])
+            if e.dot(e) > l_max * l_max:
+                self.flags[3] = 1
             bx = ti.min(ti.cast(m[0] / st.Lx * nbx, ti.i32), nbx - 1)
             by = ti.min(ti.cast(m[1] / st.Ly * nby, ti.i32), nby - 1)
-            b = bx * nby + by
-            self.seg_bin[s] = b
-            ti.atomic_add(self.bin_count[b], 1)
+            bn = bx * nby + by
+            self.seg_bin[s] = bn
+            ti.atomic_add(self.bin_count[bn], 1)
         ti.loop_config(serialize=True)
         for i in range(nbx * nby + 1):
             if i == 0:
@@ -75,11 +137,13 @@ class NeighbourList:
         for s in range(st.n_s):
             cs = s // (N - 1)
             ks = s % (N - 1)
-            ms = st.seg_mid(s)
-            b = self.seg_bin[s]
-            bx0 = b // nby
-            by0 = b % nby
+            s_end = ks == 0 or ks == N - 2
+            row_g = 2 * cs + (0 if ks == 0 else 1)
+            b0 = self.seg_bin[s]
+            bx0 = b0 // nby
+            by0 = b0 % nby
             n = 0
+            ng = 0
             for ox in ti.static(range(-1, 2) if nbx >= 3 else range(nbx)):
                 bx = ox
                 if ti.static(nbx >= 3):
@@ -93,42 +157,63 @@ class NeighbourList:
                         t = self.bin_items[q]
                         ct = t // (N - 1)
                         kt = t % (N - 1)
+                        # a cell's own neighbouring segments are the springs' and the bending's business
                         if t != s and (ct != cs or abs(kt - ks) >= 2):
-                            d = st.mi(st.seg_mid(t) - ms)
-                            if d.dot(d) < r2:
+                            d = self.seg_distance(s, t)
+                            if d < cut_c:
                                 if n < self.max_nbrs:
                                     self.nbr[s, n] = t
                                 else:
                                     self.flags[0] = 1
                                 n += 1
+                            if ti.static(self.guiding):
+                                if s_end and (kt == 0 or kt == N - 2) and d < cut_g:
+                                    if ng < self.max_guides:
+                                        self.guide[row_g, ng] = t
+                                    else:
+                                        self.flags[2] = 1
+                                    ng += 1
             n = ti.min(n, self.max_nbrs)
             self.nbr_n[s] = n
-            # insertion sort: the list, and so every force sum, is independent of thread scheduling
-            for i in range(1, n):
-                v = self.nbr[s, i]
-                j = i - 1
-                while j >= 0 and self.nbr[s, j] > v:
-                    self.nbr[s, j + 1] = self.nbr[s, j]
-                    j -= 1
-                self.nbr[s, j + 1] = v
+            self._sort_row(self.nbr, s, n)
+            if ti.static(self.guiding):
+                if s_end:
+                    ng = ti.min(ng, self.max_guides)
+                    self.guide_n[row_g] = ng
+                    self._sort_row(self.guide, row_g, ng)
+        ti.loop_config(serialize=st.serial)
+        for s in range(st.n_s):
+            for q in range(self.nbr_n[s]):
+                t = self.nbr[s, q]
+                self.rev[s, q] = -1
+                if t < s:
+                    for q2 in range(self.nbr_n[t]):
+                        if self.nbr[t, q2] == s:
+                            self.rev[s, q] = q2
         ti.loop_config(serialize=st.serial)
         for p in range(st.n_p):
             self.x_ref[p] = st.x[p]
         self.flags[1] = 0
 
     def rebuild(self) -> None:
-        self.flags[0] = 0
+        self.flags[0] = self.flags[2] = self.flags[3] = 0
         self._build()
         self.rebuilds += 1
-        if self.flags[0]:
+        if self.flags[0] or self.flags[2]:
+            which = ("segments within W + skin of one segment", self.max_nbrs) if self.flags[0] else \
+                ("cell ends within W + d_g + skin of one cell end", self.max_guides)
             raise NeighbourOverflow(
-                f"more than {self.max_nbrs} segments within the neighbour radius of one segment: cells are packed "
-                f"beyond area fraction 1 or blew up; set run.max_neighbours higher or use a smaller time step")
+                f"more than {which[1]} {which[0]}: cells are packed beyond area fraction 1 or blew up; set "
+                f"run.max_neighbours higher or use a smaller time step")
+        if self.flags[3]:
+            raise NeighbourOverflow(
+                f"segment lengths above {LENGTH_BOUND:g} l0 outside 1 +- {SEGMENT_LENGTH_TOL} l0 at a neighbour-list "
+                f"build: the chain blew up; use a smaller time step")
 
     @ti.func
     def store(self, p, xn):
-        """Wrap and store particle p's new position; 1 if it has moved past half the skin since the build (the list
-        stays valid while no two particles have closed in by more than the skin)."""
+        """Wrap and store particle p's new position; 1 if it has moved past half the skin since the build (the lists
+        stay valid while no two particles have closed in by more than the skin)."""
         st = self.state
         xn = st.wrap(xn)
         st.x[p] = xn

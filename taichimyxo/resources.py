@@ -21,7 +21,8 @@ RUNTIME_BYTES = 512 * 1024 ** 2
 HOST_BYTES_PER_PARTICLE = 8 * 2 * 8
 INDEX_LIMIT = 2 ** 31 - 1          # Taichi indexes fields with 32-bit integers
 # what a field holds, for messages
-FIELD_NAMES = {"nbr": "the neighbour list", "bin_count": "the neighbour-search grid",
+FIELD_NAMES = {"nbr": "the neighbour list", "rev": "the neighbour list", "pair_f": "the contact pairs' forces",
+               "guide": "the guiding list", "bin_count": "the neighbour-search grid",
                "bin_start": "the neighbour-search grid", "bin_cursor": "the neighbour-search grid",
                "slime": "the slime grid", "slime_claim": "the slime grid", "Lf": "the implicit step's factors",
                "ct_t": "the implicit step's contact list", "ct_w": "the implicit step's contact list"}
@@ -37,28 +38,37 @@ def _fmt(n: float) -> str:
 def field_sizes(scene, contacts: str = "coupled") -> dict:
     """Name -> (entries, bytes) of every field the scene's Simulation allocates (state.py, neighbours.py, the units
     of terms/ and the integrator), by the same rules."""
-    from .neighbours import list_radius
-    from .state import SERIAL_BELOW_SEGMENTS, list_capacity
+    from .neighbours import grid_radius
+    from .state import SERIAL_BELOW_SEGMENTS, list_capacities
     n, N = scene.n_cells, scene.N
     P, S, C = n * N, n * (N - 1), n
     pb = 8 if scene.precision in ("f64", "mixed") else 4         # positions
     fb = 8 if scene.precision == "f64" else 4                     # forces
-    head_tail = scene.guiding != "none" or scene.suppression
-    r = list_radius(scene.rest_length, scene.width, scene.guiding_range if head_tail else 0.0, scene.skin)
-    cap = scene.max_neighbours or list_capacity(r, scene.rest_length, scene.width)
+    caps = list_capacities(scene)
+    cap = caps["capacity"]
+    cutoff = scene.width + scene.skin + caps.get("guiding_range", 0.0)
+    r = grid_radius(scene.rest_length, cutoff)
     Lx, Ly = scene.box
     bins = max(1, int(Lx // r)) * max(1, int(Ly // r))
-    out = {"x": (P, P * 2 * pb), "x_ref": (P, P * 2 * pb), "x_snap": (P, P * 2 * pb),
-           "fa": (S, S * 2 * fb), "fb": (S, S * 2 * fb), "ke": (C, C * 4),
-           "nbr": (S * cap, S * cap * 4), "nbr_n": (S, S * 4),
+    out = {"x": (P, P * 2 * pb), "x_ref": (P, P * 2 * pb), "x_snap": (P, P * 2 * pb), "ke": (C, C * 4),
+           "nbr": (S * cap, S * cap * 4), "rev": (S * cap, S * cap * 4), "nbr_n": (S, S * 4),
            "bin_count": (bins, bins * 4), "bin_start": (bins + 1, (bins + 1) * 4), "bin_cursor": (bins, bins * 4),
            "bin_items": (S, S * 4), "seg_bin": (S, S * 4), "flags": (4, 16)}
+    if "guiding_capacity" in caps:
+        g = 2 * C * caps["guiding_capacity"]
+        out["guide"] = (g, g * 4)
+        out["guide_n"] = (2 * C, 2 * C * 4)
+    if scene.integrator == "imex" and contacts != "explicit":
+        out["fa"] = (S, S * 2 * fb)                                # each segment gathers and records its own
+        out["fb"] = (S, S * 2 * fb)
+    else:
+        out["pair_f"] = (S * cap, S * cap * 8 * fb)                # each pair once, both sides' results
     if scene.guiding != "none":
         out["g_head"] = (C, C * 2 * fb)
     if scene.guiding == "adhesion":
         out["g_tail"] = (C, C * 2 * fb)
     if scene.suppression:
-        out["interacting"] = (C, C * 4)
+        out["interacting"] = (C, C * 2 * 4)
     if scene.reversals:
         for k in ("rev_clock", "rev_period", "rev_count"):
             out[k] = (C, C * 4)
@@ -105,7 +115,8 @@ def estimate(scene) -> dict:
     if scene.start == "random":
         from .init import placement_grid_bytes
         host += placement_grid_bytes(scene)
-    return {"fields": fields, "neighbour_list": f["nbr"][1] + f["bin_count"][1] * 3,
+    lists = f["nbr"][1] + f["rev"][1] + f.get("pair_f", (0, 0))[1] + f.get("guide", (0, 0))[1] + f["bin_count"][1] * 3
+    return {"fields": fields, "neighbour_list": lists,
             "slime_grid": f["slime"][1] + f["slime_claim"][1] if "slime" in f else 0,
             "host": host, "runtime": RUNTIME_BYTES, "total": fields + host + RUNTIME_BYTES, "_sizes": f}
 

@@ -22,8 +22,8 @@ import taichi as ti
 from .frame import Frame
 from .integrators import make_integrator, records_contacts
 from .model import Model, field_bytes, fields_of
-from .neighbours import NeighbourList, NeighbourOverflow, list_radius  # noqa: F401  (NeighbourOverflow: API)
-from .state import Layout, State, list_capacity
+from .neighbours import NeighbourList, NeighbourOverflow  # noqa: F401  (NeighbourOverflow: API)
+from .state import Layout, State, list_capacities
 
 
 class Simulation:
@@ -39,10 +39,7 @@ class Simulation:
         self.writers = []
         fb = ti.FieldsBuilder()
         self.state = State(self.layout, fb)
-        head_tail = scene.guiding != "none" or scene.suppression
-        r = list_radius(scene.rest_length, scene.width, scene.guiding_range if head_tail else 0.0, scene.skin)
-        cap = scene.max_neighbours or list_capacity(r, scene.rest_length, scene.width)
-        self.neighbours = NeighbourList(self.state, fb, r, cap, scene.skin)
+        self.neighbours = NeighbourList(self.state, fb, scene.width, scene.skin, **list_capacities(scene))
         self.model = Model(scene, self.state, self.neighbours, fb,
                            record_contacts=records_contacts(scene, **integrator_options))
         self.integrator = make_integrator(scene, self.state, self.model, self.neighbours, fb, **integrator_options)

@@ -19,16 +19,80 @@ from .geometry import min_image as np_min_image
 # Taichi's CPU backend spends ~75 µs launching a parallel loop; below a few thousand segments one thread running the
 # loops serially is faster than two threads (measured: benchmarks/throughput.py).
 SERIAL_BELOW_SEGMENTS = int(os.environ.get("TAICHIMYXO_SERIAL_BELOW", "3000"))
+# a segment outside (1 +- 0.5) l0 means the chain blew up: frames check it (writers.check_frame), and the neighbour
+# grid is sized for segments up to 1.5 l0 and checks it at every build
+SEGMENT_LENGTH_TOL = 0.5
 
 
 @ti.func
 def min_image(d, Lx: ti.template(), Ly: ti.template()):
-    return ti.Vector([d[0] - Lx * ti.round(d[0] / Lx), d[1] - Ly * ti.round(d[1] / Ly)])
+    """Minimum image of the difference of two positions stored in the box (|d| < L per axis, true of every use):
+    d - L round(d / L), bit for bit, as a compare and select per axis (the division and the libm round call cost
+    as much as a contact's arithmetic; measured in benchmarks/results/perf/README.md)."""
+    return ti.Vector([_wrap_diff(d[0], Lx), _wrap_diff(d[1], Ly)])
+
+
+@ti.func
+def _wrap_diff(a, L: ti.template()):
+    r = a
+    if a >= 0.5 * L:
+        r = a - L
+    elif a <= -0.5 * L:
+        r = a + L
+    return r
+
+
+@ti.func
+def _wrap_coord(a, L: ti.template()):
+    """a - L floor(a / L) for a in [-L, 2L), bit for bit (positions move far less than a box per step)."""
+    r = a
+    if a < 0.0:
+        r = a + L
+    elif a >= L:
+        r = a - L
+    return r
 
 
 @ti.func
 def perp(v):
     return ti.Vector([-v[1], v[0]])
+
+
+@ti.func
+def closest_points(p1, q1, p2, q2):
+    """Closest points of segments p1-q1 and p2-q2: returns (s, t, c1, c2) with s, t in [0, 1]. Parallel overlapping
+    segments take the middle of the overlap (see taichimyxo/geometry.py, the numpy twin)."""
+    d1 = q1 - p1
+    d2 = q2 - p2
+    r = p1 - p2
+    a = d1.dot(d1)
+    e = d2.dot(d2)
+    f = d2.dot(r)
+    c = d1.dot(r)
+    b = d1.dot(d2)
+    eps = 1e-12
+    s = a * 0.0          # typed like the inputs (f32 or f64), not the default float
+    t = a * 0.0
+    if a > eps and e > eps:
+        denom = a * e - b * b
+        if denom > 1e-9 * a * e:
+            s = ti.math.clamp((b * f - c * e) / denom, 0.0, 1.0)
+        else:
+            t0 = ti.math.clamp(-c / a, 0.0, 1.0)
+            t1 = ti.math.clamp((b - c) / a, 0.0, 1.0)
+            s = 0.5 * (t0 + t1)
+        t = (b * s + f) / e
+        if t < 0.0:
+            t = 0.0
+            s = ti.math.clamp(-c / a, 0.0, 1.0)
+        elif t > 1.0:
+            t = 1.0
+            s = ti.math.clamp((b - c) / a, 0.0, 1.0)
+    elif a > eps:
+        s = ti.math.clamp(-c / a, 0.0, 1.0)
+    elif e > eps:
+        t = ti.math.clamp(f / e, 0.0, 1.0)
+    return s, t, p1 + d1 * s, p2 + d2 * t
 
 
 @dataclass(frozen=True)
@@ -102,7 +166,7 @@ class State:
     def seg_mid(self, s):
         a, b = self.seg_ends(s)
         m = self.x[a] + 0.5 * self.mi(self.x[b] - self.x[a])
-        return ti.Vector([m[0] - self.Lx * ti.floor(m[0] / self.Lx), m[1] - self.Ly * ti.floor(m[1] / self.Ly)])
+        return ti.Vector([_wrap_coord(m[0], self.Lx), _wrap_coord(m[1], self.Ly)])
 
     @ti.func
     def head_seg(self, c):
@@ -114,9 +178,7 @@ class State:
 
     @ti.func
     def wrap(self, xn):
-        xn[0] -= self.Lx * ti.floor(xn[0] / self.Lx)
-        xn[1] -= self.Ly * ti.floor(xn[1] / self.Ly)
-        return xn
+        return ti.Vector([_wrap_coord(xn[0], self.Lx), _wrap_coord(xn[1], self.Ly)])
 
     # ------------------------------------------------------------------ host side
     def load(self, positions, engine_direction) -> None:
@@ -166,7 +228,23 @@ class State:
         return (d / t * 60.0).reshape(self.n_cells, self.N, 2).astype(np.float32)
 
 
-def list_capacity(radius: float, l0: float, W: float) -> int:
-    """Neighbour capacity per segment: segments whose midpoints lie within `radius` at the densest packing (area
-    fraction 1), with a margin."""
-    return int(math.ceil(1.6 * math.pi * radius * radius / (l0 * W))) + 8
+def list_capacity(cutoff: float, l0: float, W: float, fraction: float = 1.0) -> int:
+    """List capacity per segment: segments (or, with fraction < 1, that share of them) whose closest points lie within
+    `cutoff` of one segment at the densest packing (area fraction 1: one segment per l0 W), with a margin of 1.6x + 8
+    for overlapping cells in aggregates. The region: a segment of length l_max = 1.25 l0 dilated by cutoff, swept by
+    the other segment at every orientation (mean area of the Minkowski sum: pi r^2 + 4 r l + 2 l^2 / pi)."""
+    r, l = cutoff, 1.25 * l0
+    area = math.pi * r * r + 4 * r * l + 2 * l * l / math.pi
+    return int(math.ceil(1.6 * fraction * area / (l0 * W))) + 8
+
+
+def list_capacities(scene) -> dict:
+    """The neighbour lists' sizes for a scene (NeighbourList keywords): contact partners within W + skin
+    (run.max_neighbours overrides), and, when guiding or suppression is on, the guiding range and the partners per
+    cell end (only end segments: 2 of every N - 1 segments)."""
+    l0, W, skin = scene.rest_length, scene.width, scene.skin
+    out = {"capacity": scene.max_neighbours or list_capacity(W + skin, l0, W)}
+    if scene.guiding != "none" or scene.suppression:
+        d_g = scene.guiding_range
+        out.update(guiding_range=d_g, guiding_capacity=list_capacity(W + d_g + skin, l0, W, 2.0 / (scene.N - 1)))
+    return out

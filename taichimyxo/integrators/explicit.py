@@ -24,7 +24,6 @@ class Explicit:
         st = self.state
         m = self.model
         N = ti.static(self.N)
-        m.begin()
         m.pairs()
         ti.loop_config(serialize=st.serial)
         for c in range(st.n_cells):

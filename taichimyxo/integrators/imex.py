@@ -188,7 +188,6 @@ class Imex:
         C = ti.static(self.state.n_cells)
         bs = ti.static(self.bs)
         dtf = ti.cast(dt, self.state.fdt)
-        self.model.begin()
         self.model.pairs()
         if ti.static(not self.coupled):
             ti.loop_config(serialize=self.state.serial)

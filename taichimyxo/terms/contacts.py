@@ -14,13 +14,18 @@ number however many segments meet at the nearest point (a node contact counts on
 With nodes alone the force on two side-by-side cells swung by 17 % with their stagger; the midpoints bring it within
 10 % (measured: tests/test_contacts.py sweeps tilt and stagger).
 "Nearest segment" is decided locally: p against segment t counts when t is strictly nearer than t - 1 and at least
-as near as t + 1. Every distance of one sample is computed in that sample's frame by one function, so the force on
-the sample (gathered by its own segment) and the reaction (gathered by t) come from identical numbers.
+as near as t + 1. Every distance of one sample is computed in that sample's frame (positions relative to its own
+segment's first particle, each point computed once from its own position: `chain_points`), so the comparisons of
+t with t - 1 and t + 1 see identical numbers whichever pair asks, and a node contact counts exactly once.
 
-Determinism: a contact is evaluated from both sides and each segment gathers its own forces, over a sorted
-neighbour list, so sums do not depend on thread scheduling. Here too: the energy (`sample_energy`, and the numpy
-reference taichimyxo.geometry.contact_energy), the per-cell force (`add_cell_forces`) and, for the linearly implicit
-step, the contact stiffness (`add_stiffness`, `add_coupling`) from the contacts each segment records.
+Cost and determinism. The contact list (neighbours.py) holds pairs of segments within W + skin by true distance;
+each pair (s, t > s) is evaluated once, by s, after a closest-points test of the two segments (no sample is nearer
+than that), and both sides' results go into s's row of `pair_f`; each segment then gathers its pairs' results in
+list order (its own rows for t > s, t's row at `rev` for t < s). No atomics, sorted lists: sums do not depend on
+thread scheduling (1 and 2 threads bit-identical). The implicit step needs each segment's own record of its contacts
+for the Jacobian, so with `record` each segment gathers from both sides (`gather_segment`). Here too: the energy
+(`sample_energy`, and the numpy reference taichimyxo.geometry.contact_energy), the per-cell force
+(`add_cell_forces`) and the contact stiffness (`add_stiffness`, `add_coupling`).
 """
 
 import taichi as ti
@@ -40,37 +45,49 @@ class Contacts:
         self.state, self.nl = state, neighbours
         self.N, self.W, self.k_c = scene.N, scene.width, scene.k_c
         S = state.n_s
-        self.fa = state.vec(fb, S, state.fdt)        # contact force on a segment's first particle
-        self.fb = state.vec(fb, S, state.fdt)        # ... and on its second particle
         self.record = record
-        if record:
+        if not record:
+            # each pair once: the lower segment s of a listed pair (s, t) evaluates both sides into its slot of s's
+            # row, (forces on s's two particles, forces on t's two); both segments gather them in list order
+            self.pair_f = ti.Vector.field(8, dtype=state.fdt)
+            fb.dense(ti.ij, (S, neighbours.max_nbrs)).place(self.pair_f)
+            self.fa = self.fb = None
+        else:
+            # the implicit step records each segment's view of its contacts, so each segment gathers its own
+            self.pair_f = None
+            self.fa = state.vec(fb, S, state.fdt)    # contact force on a segment's first particle
+            self.fb = state.vec(fb, S, state.fdt)    # ... and on its second particle
             # each segment's view of its contacts, for the Jacobian: (P on s, Q on t, n_x, n_y), n from t to s
             self.ct_n = state.scalar(fb, S, ti.i32)
             self.ct_t = ti.field(ti.i32)
             self.ct_w = ti.Vector.field(4, dtype=state.fdt)
             fb.dense(ti.ij, (S, self.MAX_CONTACTS)).place(self.ct_t, self.ct_w)
             self.overflow = state.scalar(fb, 1, ti.i32)
-        else:
+        if not record:
             self.ct_n = self.ct_t = self.ct_w = self.overflow = None
 
-    # ------------------------------------------------------------------ the law
+    # ------------------------------------------------------------------ the law, in a pair's local frame
     @ti.func
-    def sample(self, s, j):
-        """Sample j of segment s (0: first particle, 1: midpoint, 2: second particle): (position in position
-        precision, index along the cell in half-segments, contact weight)."""
+    def chain_points(self, t, o):
+        """Segment t and its chain neighbours relative to o, in force precision: (A, B) its first and second
+        particle, Ap the particle before A (A itself at the cell's first end), Bn the one after B (B at the last).
+        Each point is computed directly from its own position and o, so a particle shared by t and t + 1 has the
+        same numbers whichever segment is asked: the nearest-segment rule compares identical distances, and a sample
+        nearest to a node counts exactly once (measured: offsets chained from A lost a quarter of the force of two
+        cells side by side at 3e-5 rad in mixed precision)."""
         st = self.state
         N = ti.static(self.N)
-        a, b = st.seg_ends(s)
-        x = st.x[a]
-        if j == 1:
-            x = x + 0.5 * st.mi(st.x[b] - x)
-        elif j == 2:
-            x = st.x[b]
-        h = 2 * (s % (N - 1)) + j
-        w = ti.cast(self.CONTACT_WEIGHT, st.fdt)          # a Taichi variable: a Python float would not branch
-        if h == 0 or h == 2 * (N - 1):
-            w = ti.cast(self.POLE_WEIGHT, st.fdt)
-        return x, h, w
+        a, b = st.seg_ends(t)
+        A = ti.cast(st.mi(st.x[a] - o), st.fdt)
+        B = ti.cast(st.mi(st.x[b] - o), st.fdt)
+        Ap = A
+        Bn = B
+        kt = t % (N - 1)
+        if kt > 0:
+            Ap = ti.cast(st.mi(st.x[a - 1] - o), st.fdt)
+        if kt < N - 2:
+            Bn = ti.cast(st.mi(st.x[b + 1] - o), st.fdt)
+        return A, B, Ap, Bn
 
     @ti.func
     def sample_eligible(self, c, h, t):
@@ -85,24 +102,24 @@ class Contacts:
         return ok
 
     @ti.func
-    def point_seg(self, xp, t):
-        """Point xp against segment t in xp's frame (force precision): (u on t, d, closest point of t - xp)."""
-        st = self.state
-        a, b = st.seg_ends(t)
-        e0 = ti.cast(st.mi(st.x[a] - xp), st.fdt)
-        e = ti.cast(st.mi(st.x[b] - st.x[a]), st.fdt)
+    def point_seg(self, xp, A, B):
+        """Point xp against the segment A-B: (u on it, distance, closest point - xp)."""
+        e0 = A - xp
+        e = B - A
         ee = e.dot(e)
-        u = ti.cast(0.0, st.fdt)
+        u = ee * 0.0                                   # typed like the inputs
         if ee > 1e-12:
             u = ti.math.clamp(-e0.dot(e) / ee, 0.0, 1.0)
-        c = e0 + u * e
-        return u, c.norm(), c
+        cp = e0 + u * e
+        return u, cp.norm(), cp
 
     @ti.func
-    def sample_contact(self, s, j, t):
-        """Contact of sample j of segment s with segment t (the rule above): (accepted, u on t, force on the sample,
+    def contact(self, s, j, P0, P1, t, A, B, Ap, Bn):
+        """Sample j (0: first particle, 1: midpoint, 2: second particle) of segment s, whose particles are P0, P1,
+        against segment t = A-B (chain neighbours Ap, Bn), all in one frame: (accepted, u on t, force on the sample,
         its unit direction n, the sample's weight w). The reaction on t is -force, shared (1 - u, u) by t's
-        particles."""
+        particles. The rule: the sample is within W of t, t is strictly nearer than t - 1 and at least as near as
+        t + 1 (so a sample nearest to a node of t's chain counts once)."""
         st = self.state
         N = ti.static(self.N)
         ok = False
@@ -110,18 +127,26 @@ class Contacts:
         f = ti.Vector([0.0, 0.0], dt=st.fdt)
         n = ti.Vector([0.0, 0.0], dt=st.fdt)
         c = s // (N - 1)
-        xp, h, w = self.sample(s, j)
+        h = 2 * (s % (N - 1)) + j
+        w = ti.cast(self.CONTACT_WEIGHT, st.fdt)          # a Taichi variable: a Python float would not branch
+        if h == 0 or h == 2 * (N - 1):
+            w = ti.cast(self.POLE_WEIGHT, st.fdt)
+        xp = P0
+        if j == 1:
+            xp = 0.5 * (P0 + P1)
+        elif j == 2:
+            xp = P1
         if self.sample_eligible(c, h, t):
-            u, dist, cp = self.point_seg(xp, t)
+            u, dist, cp = self.point_seg(xp, A, B)
             if dist < self.W:
                 ok = True
                 kt = t % (N - 1)
                 if kt > 0 and self.sample_eligible(c, h, t - 1):
-                    _, dprev, _ = self.point_seg(xp, t - 1)
+                    _, dprev, _ = self.point_seg(xp, Ap, A)
                     if dprev <= dist:
                         ok = False
                 if ok and kt < N - 2 and self.sample_eligible(c, h, t + 1):
-                    _, dnext, _ = self.point_seg(xp, t + 1)
+                    _, dnext, _ = self.point_seg(xp, B, Bn)
                     if dnext < dist:
                         ok = False
                 if ok:
@@ -129,8 +154,7 @@ class Contacts:
                         n = -cp / dist
                     else:
                         # the sample lies on the segment: push it across t, the side fixed by the indices
-                        a, b = st.seg_ends(t)
-                        e = ti.cast(st.mi(st.x[b] - st.x[a]), st.fdt)
+                        e = B - A
                         ln = e.norm()
                         n = ti.Vector([1.0, 0.0], dt=st.fdt)
                         if ln > 1e-12:
@@ -142,9 +166,9 @@ class Contacts:
 
     @ti.func
     def within_reach(self, s, t):
-        """Segments s and t can be in contact: their midpoints are closer than half their lengths plus W. Most list
-        partners (about 33 per segment at area fraction 1) are not, and are skipped before any sample is tested;
-        skipping them changes no sum, since they contribute nothing."""
+        """Segments s and t can be in contact: their midpoints are closer than half their lengths plus W. The list
+        holds pairs within W + skin; this cheap test skips those not within W now before any sample is tested
+        (skipping changes no sum: they contribute nothing)."""
         # in a fixed order (the same numbers whichever segment asks) and with a margin far above rounding, so a
         # contact is never skipped from one side only
         st = self.state
@@ -157,9 +181,48 @@ class Contacts:
         return m.dot(m) < reach * reach
 
     @ti.func
+    def side(self, p_seg, o_seg, Pp: ti.template(), Po: ti.template(), rec: ti.template(), s_rec, nc):
+        """The samples of segment p_seg (chain points Pp) pressed out of segment o_seg (Po): (forces on p_seg's first
+        and second particle, reactions on o_seg's, the contact count nc advanced). rec: 0 records nothing, 1 records
+        for s_rec = p_seg, 2 for s_rec = o_seg (the implicit step's Jacobian)."""
+        st = self.state
+        N = ti.static(self.N)
+        pa = ti.Vector([0.0, 0.0], dt=st.fdt)
+        pb = ti.Vector([0.0, 0.0], dt=st.fdt)
+        oa = ti.Vector([0.0, 0.0], dt=st.fdt)
+        ob = ti.Vector([0.0, 0.0], dt=st.fdt)
+        p_last = p_seg % (N - 1) == N - 2       # the second particle is sampled by the next segment, but at the end
+        for j in ti.static(range(3)):
+            if ti.static(j < 2) or p_last:
+                ok, u, f, n, w = self.contact(p_seg, j, Pp[0], Pp[1], o_seg, Po[0], Po[1], Po[2], Po[3])
+                if ok:
+                    P = 0.5 * j                 # the sample's lever arm on its own segment
+                    pa += (1.0 - P) * f
+                    pb += P * f
+                    oa -= (1.0 - u) * f
+                    ob -= u * f
+                    if ti.static(rec == 1):
+                        self._record(s_rec, nc, o_seg, P, u, ti.sqrt(w) * n)
+                    if ti.static(rec == 2):
+                        self._record(s_rec, nc, p_seg, u, P, -ti.sqrt(w) * n)
+                    nc += 1
+        return pa, pb, oa, ob, nc
+
+    @ti.func
+    def sample_frame(self, p_seg, o_seg):
+        """Chain points of p_seg (whose samples are tested) and of o_seg, both relative to p_seg's first particle:
+        every distance of one sample is computed in that sample's frame."""
+        a, _ = self.state.seg_ends(p_seg)
+        o = self.state.x[a]
+        Ap, Bp, App, Bnp = self.chain_points(p_seg, o)
+        Ao, Bo, Apo, Bno = self.chain_points(o_seg, o)
+        return [Ap, Bp, App, Bnp], [Ao, Bo, Apo, Bno]
+
+    @ti.func
     def sample_energy(self, s, j, t):
         """Contact energy of sample j of segment s with segment t (0 if not in contact), pN·µm, f64."""
-        ok, u, f, n, w = self.sample_contact(s, j, t)
+        Ps, Pt = self.sample_frame(s, t)
+        ok, u, f, n, w = self.contact(s, j, Ps[0], Ps[1], t, Pt[0], Pt[1], Pt[2], Pt[3])
         e = ti.cast(0.0, ti.f64)
         if ok:
             fn = ti.cast(f.norm(), ti.f64)
@@ -168,46 +231,77 @@ class Contacts:
 
     # ------------------------------------------------------------------ forces
     @ti.func
+    def pair_pass(self, s):
+        """Segment s's share of the pair loop: with recorded contacts (implicit step), gather its own; otherwise
+        evaluate each listed pair (s, t > s) once, both sides, into s's row."""
+        if ti.static(self.record):
+            self.gather_segment(s)
+        else:
+            st = self.state
+            nl = self.nl
+            for q in range(nl.nbr_n[s]):
+                t = nl.nbr[s, q]
+                if t > s:
+                    v = ti.Vector.zero(st.fdt, 8)
+                    # the segments' own distance first: no sample of one is nearer the other than that, and most
+                    # listed pairs (within W + skin) do not touch (margin far above rounding: a borderline pair is
+                    # evaluated in full, and the samples decide). It chains t's offsets, so a far pair (a list
+                    # wider than half the box) cannot pass by mapping t's two ends to different images; a pair that
+                    # passes is close, and every point's own minimum image in `sample_frame` is then the chain's.
+                    if nl.seg_distance(s, t) < self.W * (1.0 + 1e-3):
+                        Ps, Pt = self.sample_frame(s, t)
+                        sa, sb, ta, tb, _n = self.side(s, t, Ps, Pt, 0, s, 0)
+                        Pt2, Ps2 = self.sample_frame(t, s)
+                        ta2, tb2, sa2, sb2, _m = self.side(t, s, Pt2, Ps2, 0, s, 0)
+                        sa += sa2
+                        sb += sb2
+                        ta += ta2
+                        tb += tb2
+                        v = ti.Vector([sa[0], sa[1], sb[0], sb[1], ta[0], ta[1], tb[0], tb[1]])
+                    self.pair_f[s, q] = v
+
+    @ti.func
+    def segment_forces(self, s):
+        """Contact forces on segment s's two particles (after the pair loop): its pairs' results, in list order."""
+        st = self.state
+        fa = ti.Vector([0.0, 0.0], dt=st.fdt)
+        fb = ti.Vector([0.0, 0.0], dt=st.fdt)
+        if ti.static(self.record):
+            fa = self.fa[s]
+            fb = self.fb[s]
+        else:
+            nl = self.nl
+            for q in range(nl.nbr_n[s]):
+                t = nl.nbr[s, q]
+                if t > s:
+                    v = self.pair_f[s, q]
+                    fa += ti.Vector([v[0], v[1]])
+                    fb += ti.Vector([v[2], v[3]])
+                else:
+                    v = self.pair_f[t, nl.rev[s, q]]
+                    fa += ti.Vector([v[4], v[5]])
+                    fb += ti.Vector([v[6], v[7]])
+        return fa, fb
+
+    @ti.func
     def gather_segment(self, s):
-        """Contact forces onto segment s's two particles: the forces on its own samples, and the reactions of other
-        cells' samples pressing on it (shared by the lever rule)."""
+        """Implicit step: segment s gathers its contacts from both sides (its own samples pressed by t, and t's
+        samples pressing on it) and records each for the Jacobian."""
         st = self.state
         nl = self.nl
-        N = ti.static(self.N)
         fa = ti.Vector([0.0, 0.0], dt=st.fdt)
         fb = ti.Vector([0.0, 0.0], dt=st.fdt)
         nc = 0
-        s_last = s % (N - 1) == N - 2
         for q in range(nl.nbr_n[s]):
             t = nl.nbr[s, q]
-            if not self.within_reach(s, t):
-                continue
-            t_last = t % (N - 1) == N - 2
-            # side 0: this segment's own samples pressed by t (its second particle belongs to the next segment,
-            # except at the cell's end); side 1: t's samples pressing on this segment. The sides are a runtime loop
-            # and the three samples unrolled: the contact code is compiled three times, not six (the step took 15 s
-            # to compile fully unrolled, 5 s before the sample law), and within a side the other segment's loads
-            # are shared by the three samples.
-            for side in range(2):
-                p_seg, o_seg, p_last = s, t, s_last
-                if side == 1:
-                    p_seg, o_seg, p_last = t, s, t_last
-                for j in ti.static(range(3)):
-                    if ti.static(j < 2) or p_last:
-                        ok, u, f, n, w = self.sample_contact(p_seg, j, o_seg)
-                        if ok:
-                            P = 0.5 * j                # the sample's lever arm on its own segment
-                            if side == 0:
-                                fa += (1.0 - P) * f
-                                fb += P * f
-                                self._record(s, nc, t, P, u, ti.sqrt(w) * n)
-                            else:
-                                fa -= (1.0 - u) * f
-                                fb -= u * f
-                                self._record(s, nc, t, u, P, -ti.sqrt(w) * n)
-                            nc += 1
-        if ti.static(self.record):
-            self.ct_n[s] = ti.min(nc, self.MAX_CONTACTS)
+            if self.within_reach(s, t):
+                Ps, Pt = self.sample_frame(s, t)
+                sa, sb, _a, _b, nc = self.side(s, t, Ps, Pt, 1, s, nc)
+                Pt2, Ps2 = self.sample_frame(t, s)
+                _c, _d, sa2, sb2, nc = self.side(t, s, Pt2, Ps2, 2, s, nc)
+                fa += sa + sa2
+                fb += sb + sb2
+        self.ct_n[s] = ti.min(nc, self.MAX_CONTACTS)
         self.fa[s] = fa
         self.fb[s] = fb
 
@@ -226,25 +320,43 @@ class Contacts:
     def add_cell_forces(self, c, T, F):
         """F (N x 2) of cell c += the contact forces its segments gathered."""
         N = ti.static(self.N)
-        for k in ti.static(range(N)):
-            f = ti.Vector([F[k, 0], F[k, 1]])
-            if ti.static(k > 0):
-                f += self.fb[c * (N - 1) + k - 1]
-            if ti.static(k < N - 1):
-                f += self.fa[c * (N - 1) + k]
-            F[k, 0] = f[0]
-            F[k, 1] = f[1]
+        for k in ti.static(range(N - 1)):
+            fa, fb = self.segment_forces(c * (N - 1) + k)
+            F[k, 0] += fa[0]
+            F[k, 1] += fa[1]
+            F[k + 1, 0] += fb[0]
+            F[k + 1, 1] += fb[1]
         return F
 
+    @ti.kernel
+    def _segment_forces_to(self, out_a: ti.template(), out_b: ti.template()):
+        ti.loop_config(serialize=self.state.serial)
+        for s in range(self.state.n_s):
+            fa, fb = self.segment_forces(s)
+            out_a[s] = ti.cast(fa, ti.f64)
+            out_b[s] = ti.cast(fb, ti.f64)
+
     def per_particle(self):
-        """(n_cells, N, 2) float64 contact force on each particle, pN (host side, after a force evaluation)."""
+        """(n_cells, N, 2) float64 contact force on each particle, pN (host side, after a force evaluation; output
+        fields made on first use, a measurement and not part of a run's memory)."""
         import numpy as np
         st = self.state
+        if getattr(self, "_out", None) is None:
+            fb = ti.FieldsBuilder()
+            out = [ti.Vector.field(2, dtype=ti.f64) for _ in range(2)]
+            fb.dense(ti.i, st.n_s).place(*out)
+            self._out = (*out, fb.finalize())
+        self._segment_forces_to(self._out[0], self._out[1])
         sh = (st.n_cells, st.N - 1, 2)
-        out = np.zeros((st.n_cells, st.N, 2))
-        out[:, :-1] += self.fa.to_numpy().astype(np.float64).reshape(sh)
-        out[:, 1:] += self.fb.to_numpy().astype(np.float64).reshape(sh)
-        return out
+        res = np.zeros((st.n_cells, st.N, 2))
+        res[:, :-1] += self._out[0].to_numpy().reshape(sh)
+        res[:, 1:] += self._out[1].to_numpy().reshape(sh)
+        return res
+
+    def close(self) -> None:
+        if getattr(self, "_out", None) is not None:
+            self._out[2].destroy()
+            self._out = None
 
     # ------------------------------------------------------------------ stiffness, for the linearly implicit step
     @ti.func

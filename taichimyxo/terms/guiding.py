@@ -11,44 +11,7 @@ g_head (any guiding), g_tail (adhesion), interacting (suppression).
 
 import taichi as ti
 
-from ..state import perp
-
-
-@ti.func
-def closest_points(p1, q1, p2, q2):
-    """Closest points of segments p1-q1 and p2-q2: returns (s, t, c1, c2) with s, t in [0, 1]. Parallel overlapping
-    segments take the middle of the overlap (see taichimyxo/geometry.py, the numpy twin)."""
-    d1 = q1 - p1
-    d2 = q2 - p2
-    r = p1 - p2
-    a = d1.dot(d1)
-    e = d2.dot(d2)
-    f = d2.dot(r)
-    c = d1.dot(r)
-    b = d1.dot(d2)
-    eps = 1e-12
-    s = a * 0.0          # typed like the inputs (f32 or f64), not the default float
-    t = a * 0.0
-    if a > eps and e > eps:
-        denom = a * e - b * b
-        if denom > 1e-9 * a * e:
-            s = ti.math.clamp((b * f - c * e) / denom, 0.0, 1.0)
-        else:
-            t0 = ti.math.clamp(-c / a, 0.0, 1.0)
-            t1 = ti.math.clamp((b - c) / a, 0.0, 1.0)
-            s = 0.5 * (t0 + t1)
-        t = (b * s + f) / e
-        if t < 0.0:
-            t = 0.0
-            s = ti.math.clamp(-c / a, 0.0, 1.0)
-        elif t > 1.0:
-            t = 1.0
-            s = ti.math.clamp((b - c) / a, 0.0, 1.0)
-    elif a > eps:
-        s = ti.math.clamp(-c / a, 0.0, 1.0)
-    elif e > eps:
-        t = ti.math.clamp(f / e, 0.0, 1.0)
-    return s, t, p1 + d1 * s, p2 + d2 * t
+from ..state import closest_points, perp  # noqa: F401  (closest_points: tested here)
 
 
 @ti.data_oriented
@@ -66,15 +29,8 @@ class HeadToTail:
         C = state.n_cells
         self.g_head = state.vec(fb, C, state.fdt) if self.kind != "none" else None
         self.g_tail = state.vec(fb, C, state.fdt) if self.kind == "adhesion" else None
-        self.interacting = state.scalar(fb, C, ti.i32) if self.suppression else None
-
-    @ti.func
-    def begin(self):
-        """Clear the interaction flags (a parallel loop, before the pair loop)."""
-        if ti.static(self.suppression):
-            ti.loop_config(serialize=self.state.serial)
-            for c in range(self.state.n_cells):
-                self.interacting[c] = 0
+        # per cell, one flag per end (head and tail segments write their own: no atomics, no clearing pass)
+        self.interacting = state.vec(fb, C, ti.i32) if self.suppression else None
 
     @ti.func
     def pair(self, follower_seg, leader_seg):
@@ -107,22 +63,25 @@ class HeadToTail:
         return f, g
 
     @ti.func
-    def gather_segment(self, s):
-        """The head segment gathers its cell's guiding pull, the tail segment the adhesion reaction; both set the
-        interaction flag (reversal suppression)."""
+    def pair_pass(self, s):
+        """The head segment gathers its cell's guiding pull, the tail segment the adhesion reaction, each over its
+        cell end's guiding list (neighbours.py); both write their end's interaction flag (reversal suppression)."""
         st = self.state
         nl = self.nl
-        c = s // (self.N - 1)
+        N = ti.static(self.N)
+        c = s // (N - 1)
         is_head = s == st.head_seg(c)
         is_tail = s == st.tail_seg(c)
         if is_head or is_tail:
+            end = 0 if s % (N - 1) == 0 else 1
+            row = 2 * c + end
             gh = ti.Vector([0.0, 0.0], dt=st.fdt)
             gt = ti.Vector([0.0, 0.0], dt=st.fdt)
             inter = 0
-            # the cell's own tail segment is not in its head segment's list when they are adjacent (N=3)
-            for q in range(nl.nbr_n[s]):
-                t = nl.nbr[s, q]
-                ct = t // (self.N - 1)
+            # the cell's own tail segment is not listed for its head segment when they are adjacent (N=3)
+            for q in range(nl.guide_n[row]):
+                t = nl.guide[row, q]
+                ct = t // (N - 1)
                 if ti.static(not self.guide_self):
                     if ct == c:
                         continue
@@ -143,8 +102,13 @@ class HeadToTail:
                 if is_tail:
                     self.g_tail[c] = gt
             if ti.static(self.suppression):
-                # head and tail segments of one cell both write: combine without a race by bit
-                ti.atomic_or(self.interacting[c], inter * (1 if is_head else 2))
+                self.interacting[c][end] = inter
+
+    @ti.func
+    def interacts(self, c):
+        """Cell c's head or tail is in a head-to-tail interaction (gap below d_g, overlap included)."""
+        v = self.interacting[c]
+        return v[0] != 0 or v[1] != 0
 
     @ti.func
     def add_cell_forces(self, c, T, F):

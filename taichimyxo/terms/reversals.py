@@ -57,7 +57,7 @@ class Reversals:
             self.rev_clock[c] = 0
             skip = False
             if ti.static(self.suppressed):
-                skip = self.head_tail.interacting[c] != 0
+                skip = self.head_tail.interacts(c)
             if not skip:
                 st.ke[c] = -st.ke[c]
                 self.rev_count[c] += 1
