@@ -6,6 +6,11 @@ from __future__ import annotations
 
 import numpy as np
 
+# A segment outside (1 +- 0.5) l0 means the chain blew up: frames check it (writers.check_positions), and the
+# neighbour grid is sized for segments up to 1.5 l0 and checks it at every build (neighbours.LENGTH_BOUND). Defined
+# here, in a module that does not import taichi, so `import taichimyxo` stays light (tests/test_api.py).
+SEGMENT_LENGTH_TOL = 0.5
+
 EPS = 1e-12
 
 

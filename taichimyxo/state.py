@@ -19,9 +19,7 @@ from .geometry import min_image as np_min_image
 # Taichi's CPU backend spends ~75 µs launching a parallel loop; below a few thousand segments one thread running the
 # loops serially is faster than two threads (measured: benchmarks/throughput.py).
 SERIAL_BELOW_SEGMENTS = int(os.environ.get("TAICHIMYXO_SERIAL_BELOW", "3000"))
-# a segment outside (1 +- 0.5) l0 means the chain blew up: frames check it (writers.check_frame), and the neighbour
-# grid is sized for segments up to 1.5 l0 and checks it at every build
-SEGMENT_LENGTH_TOL = 0.5
+from .geometry import SEGMENT_LENGTH_TOL  # noqa: F401,E402  (re-exported; defined where taichi is not imported)
 
 
 @ti.func

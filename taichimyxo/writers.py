@@ -170,7 +170,7 @@ def read_checkpoint(path, scene) -> dict:
 # Checked at every frame (positions and windowed speeds already copied for the frame, so the check is nearly free).
 # Looser than the tests' bounds (invariants.Bounds: lengths within 20 %) so a healthy long run is never stopped,
 # yet any explicit-Euler blow-up crosses them within a frame or two.
-from .state import SEGMENT_LENGTH_TOL  # noqa: E402  (one bound: frames and the neighbour grid)
+from .geometry import SEGMENT_LENGTH_TOL  # noqa: E402  (one bound: frames and the neighbour grid)
 
 
 def check_positions(pos, scene) -> str | None:
