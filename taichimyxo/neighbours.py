@@ -144,35 +144,38 @@ class NeighbourList:
             by0 = b0 % nby
             n = 0
             ng = 0
-            for ox in ti.static(range(-1, 2) if nbx >= 3 else range(nbx)):
-                bx = ox
+            # the 3 x 3 bins around (fewer on a grid narrower than 3), as a dynamic loop: unrolled, the nine inlined
+            # copies of the distance test made this kernel's compile (~7 s) longer than all of a test's run
+            rx = ti.static(3 if nbx >= 3 else nbx)
+            ry = ti.static(3 if nby >= 3 else nby)
+            for o in range(rx * ry):
+                bx = o // ry
+                by = o % ry
                 if ti.static(nbx >= 3):
-                    bx = (bx0 + ox + nbx) % nbx
-                for oy in ti.static(range(-1, 2) if nby >= 3 else range(nby)):
-                    by = oy
-                    if ti.static(nby >= 3):
-                        by = (by0 + oy + nby) % nby
-                    bb = bx * nby + by
-                    for q in range(self.bin_start[bb], self.bin_start[bb + 1]):
-                        t = self.bin_items[q]
-                        ct = t // (N - 1)
-                        kt = t % (N - 1)
-                        # a cell's own neighbouring segments are the springs' and the bending's business
-                        if t != s and (ct != cs or abs(kt - ks) >= 2):
-                            d = self.seg_distance(s, t)
-                            if d < cut_c:
-                                if n < self.max_nbrs:
-                                    self.nbr[s, n] = t
+                    bx = (bx0 + bx - 1 + nbx) % nbx
+                if ti.static(nby >= 3):
+                    by = (by0 + by - 1 + nby) % nby
+                bb = bx * nby + by
+                for q in range(self.bin_start[bb], self.bin_start[bb + 1]):
+                    t = self.bin_items[q]
+                    ct = t // (N - 1)
+                    kt = t % (N - 1)
+                    # a cell's own neighbouring segments are the springs' and the bending's business
+                    if t != s and (ct != cs or abs(kt - ks) >= 2):
+                        d = self.seg_distance(s, t)
+                        if d < cut_c:
+                            if n < self.max_nbrs:
+                                self.nbr[s, n] = t
+                            else:
+                                self.flags[0] = 1
+                            n += 1
+                        if ti.static(self.guiding):
+                            if s_end and (kt == 0 or kt == N - 2) and d < cut_g:
+                                if ng < self.max_guides:
+                                    self.guide[row_g, ng] = t
                                 else:
-                                    self.flags[0] = 1
-                                n += 1
-                            if ti.static(self.guiding):
-                                if s_end and (kt == 0 or kt == N - 2) and d < cut_g:
-                                    if ng < self.max_guides:
-                                        self.guide[row_g, ng] = t
-                                    else:
-                                        self.flags[2] = 1
-                                    ng += 1
+                                    self.flags[2] = 1
+                                ng += 1
             n = ti.min(n, self.max_nbrs)
             self.nbr_n[s] = n
             self._sort_row(self.nbr, s, n)

@@ -26,6 +26,22 @@ os.environ.setdefault("TAICHIMYXO_THREADS", "2")
 
 def pytest_configure(config):
     config.addinivalue_line("markers", "slow: slower than a few seconds (still part of the default run)")
+    config.addinivalue_line("markers", "keeps_taichi: the module holds Simulations in module-scoped fixtures, so "
+                                       "Taichi is not restarted before each of its tests")
+
+
+@pytest.fixture(autouse=True)
+def fresh_taichi(request):
+    """Taichi restarted before each test (unless its module is marked keeps_taichi), so the fields a test allocates
+    get the same ids as in every other test that builds the same configuration. Taichi's offline cache keys a
+    compiled kernel by the ids of the fields it touches (taichi/analysis/gen_offline_cache_key.cpp), so a kernel
+    compiled once, in any earlier test or run, is loaded instead of compiled again (~1-3 s instead of 10-30 s per
+    Simulation): on a clean CI machine that is most of the suite's time."""
+    if request.node.get_closest_marker("keeps_taichi") is None:
+        from taichimyxo import backend
+        backend.reset()
+        backend.init("cpu", int(os.environ["TAICHIMYXO_THREADS"]), default_fp="f64")
+    yield
 
 
 @pytest.fixture(scope="session")

@@ -20,6 +20,9 @@ import pytest
 
 from simtools import cell, contact_energy, fd_gradient, sim_with
 
+# module-scoped Simulations (compiled once, states loaded per test): Taichi is not restarted between tests
+pytestmark = pytest.mark.keeps_taichi
+
 L0 = 4.5 / 7
 W = 0.5
 K_C = 1e4          # pN/µm, the scene default 0.01 N/m

@@ -13,6 +13,9 @@ from simtools import arc_cell, build_small_scene, cell
 from taichimyxo.simulation import Simulation
 from taichimyxo.terms.bending import bend_angles
 
+# module-scoped Simulations (compiled once, states loaded per test): Taichi is not restarted between tests
+pytestmark = pytest.mark.keeps_taichi
+
 L0 = 4.5 / 7
 V_B = 4.0 / 60.0          # µm/s
 

@@ -325,9 +325,9 @@ def test_single_cell(small_scene, make_sim):
 
 
 # ------------------------------------------------------------------------------------------- property tests
-@pytest.fixture(scope="module")
+@pytest.fixture
 def sim_cache(ti_session):
-    """Simulations by compile-time configuration, reused across examples (closed at the end of the module)."""
+    """Simulations by compile-time configuration, reused across the test's examples (closed at its end)."""
     cache: dict = {}
     yield cache
     for sim in cache.values():

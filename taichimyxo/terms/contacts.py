@@ -191,21 +191,22 @@ class Contacts:
         pb = ti.Vector([0.0, 0.0], dt=st.fdt)
         oa = ti.Vector([0.0, 0.0], dt=st.fdt)
         ob = ti.Vector([0.0, 0.0], dt=st.fdt)
-        p_last = p_seg % (N - 1) == N - 2       # the second particle is sampled by the next segment, but at the end
-        for j in ti.static(range(3)):
-            if ti.static(j < 2) or p_last:
-                ok, u, f, n, w = self.contact(p_seg, j, Pp[0], Pp[1], o_seg, Po[0], Po[1], Po[2], Po[3])
-                if ok:
-                    P = 0.5 * j                 # the sample's lever arm on its own segment
-                    pa += (1.0 - P) * f
-                    pb += P * f
-                    oa -= (1.0 - u) * f
-                    ob -= u * f
-                    if ti.static(rec == 1):
-                        self._record(s_rec, nc, o_seg, P, u, ti.sqrt(w) * n)
-                    if ti.static(rec == 2):
-                        self._record(s_rec, nc, p_seg, u, P, -ti.sqrt(w) * n)
-                    nc += 1
+        # the second particle is sampled by the next segment, but at the cell's last end by this one. A dynamic loop:
+        # unrolled, the three inlined samples (x 2 sides) tripled the step kernel's compile time
+        n_samples = 3 if p_seg % (N - 1) == N - 2 else 2
+        for j in range(n_samples):
+            ok, u, f, n, w = self.contact(p_seg, j, Pp[0], Pp[1], o_seg, Po[0], Po[1], Po[2], Po[3])
+            if ok:
+                P = ti.cast(0.5 * j, st.fdt)  # the sample's lever arm on its own segment
+                pa += (1.0 - P) * f
+                pb += P * f
+                oa -= (1.0 - u) * f
+                ob -= u * f
+                if ti.static(rec == 1):
+                    self._record(s_rec, nc, o_seg, P, u, ti.sqrt(w) * n)
+                if ti.static(rec == 2):
+                    self._record(s_rec, nc, p_seg, u, P, -ti.sqrt(w) * n)
+                nc += 1
         return pa, pb, oa, ob, nc
 
     @ti.func
@@ -249,14 +250,25 @@ class Contacts:
                     # wider than half the box) cannot pass by mapping t's two ends to different images; a pair that
                     # passes is close, and every point's own minimum image in `sample_frame` is then the chain's.
                     if nl.seg_distance(s, t) < self.W * (1.0 + 1e-3):
-                        Ps, Pt = self.sample_frame(s, t)
-                        sa, sb, ta, tb, _n = self.side(s, t, Ps, Pt, 0, s, 0)
-                        Pt2, Ps2 = self.sample_frame(t, s)
-                        ta2, tb2, sa2, sb2, _m = self.side(t, s, Pt2, Ps2, 0, s, 0)
-                        sa += sa2
-                        sb += sb2
-                        ta += ta2
-                        tb += tb2
+                        sa = ti.Vector([0.0, 0.0], dt=st.fdt)
+                        sb, ta, tb = sa, sa, sa
+                        # s's samples against t, then t's against s: a dynamic loop, for the compile time as in side()
+                        for order in range(2):
+                            p, o = s, t
+                            if order == 1:
+                                p, o = t, s
+                            Pp, Po = self.sample_frame(p, o)
+                            pa, pb, oa, ob, _n = self.side(p, o, Pp, Po, 0, s, 0)
+                            if order == 0:
+                                sa += pa
+                                sb += pb
+                                ta += oa
+                                tb += ob
+                            else:
+                                ta += pa
+                                tb += pb
+                                sa += oa
+                                sb += ob
                         v = ti.Vector([sa[0], sa[1], sb[0], sb[1], ta[0], ta[1], tb[0], tb[1]])
                     self.pair_f[s, q] = v
 
@@ -320,7 +332,7 @@ class Contacts:
     def add_cell_forces(self, c, T, F):
         """F (N x 2) of cell c += the contact forces its segments gathered."""
         N = ti.static(self.N)
-        for k in ti.static(range(N - 1)):
+        for k in range(N - 1):                  # dynamic (F indexed at run time): unrolled it cost ~3 s of compile
             fa, fb = self.segment_forces(c * (N - 1) + k)
             F[k, 0] += fa[0]
             F[k, 1] += fa[1]
