@@ -9,9 +9,7 @@ partners per segment. Rates, never timed asserts.
 """
 from __future__ import annotations
 
-import time
-
-from benchlib import parser, write_csv
+from benchlib import parser, time_steps, write_csv
 
 
 def measure(name: str, skin: float, scale: float, steps: int, warm: int) -> dict:
@@ -25,14 +23,10 @@ def measure(name: str, skin: float, scale: float, steps: int, warm: int) -> dict
             over["population"] = {"cells": max(1, round(sc0.n_cells * scale * scale))}
     sc = Scene.load(name, over)
     sim = Simulation(sc)
-    sim.run(warm)
-    r0 = sim.rebuilds
-    t0 = time.perf_counter()
-    sim.run(steps)
-    wall = time.perf_counter() - t0
+    t = time_steps(sim, steps, warm)
     partners = float(sim.neighbours.nbr_n.to_numpy().mean())
     row = {"scene": name, "scale": scale, "particles": sim.n_p, "skin_um": skin, "steps": steps,
-           "ms_per_step": round(1e3 * wall / steps, 4), "rebuilds_per_1000_steps": round(1e3 * (sim.rebuilds - r0) / steps, 2),
+           "ms_per_step": t["ms_per_step"], "rebuilds_per_1000_steps": round(1e3 * t["rebuilds"] / steps, 2),
            "partners_per_segment": round(partners, 2), "list_capacity": sim.neighbours.max_nbrs}
     sim.close()
     return row

@@ -23,7 +23,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchlib import DEFAULT_OUT, parser  # noqa: F401
+from benchlib import DEFAULT_OUT, parser, time_steps  # noqa: F401
 
 HERE = Path(__file__).resolve().parent
 LAMMPS_INPUT = HERE / "lammps"
@@ -67,14 +67,7 @@ def run_taichimyxo(name: str, steps: int, warm: int) -> dict:
     from taichimyxo.simulation import Simulation
     sc = Scene.load(name, {"output": {"movie": False}})
     sim = Simulation(sc)
-    sim.run(warm)
-    r0 = sim.rebuilds
-    t0 = time.perf_counter()
-    sim.run(steps)
-    wall = time.perf_counter() - t0
-    row = {"scene": name, "particles": sim.n_p, "steps": steps, "wall_s": round(wall, 3),
-           "ms_per_step": round(1e3 * wall / steps, 4), "particle_steps_per_s": sim.n_p * steps / wall,
-           "rebuilds": sim.rebuilds - r0, "precision": sc.precision, "dt_ms": sc.dt * 1e3}
+    row = {"scene": name, **time_steps(sim, steps, warm), "precision": sc.precision, "dt_ms": sc.dt * 1e3}
     sim.close()
     return row
 
