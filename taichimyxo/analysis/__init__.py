@@ -28,14 +28,16 @@ regression), ``summary`` (a whole trajectory, the JSON), ``report`` (the text), 
 
 Everything is periodic (minimum image in the box (Lx, Ly)); positions are µm, speeds µm/min, times min.
 
-Cost: per frame O(particles) numpy (pair search, bincounts, a few dozen candidate walks): about 35 ms of CPU for
-2000 cells x 8 particles, so a 6-hour, 360-frame paper-scale trajectory takes ~12 s (+1.5 s for the plots) on one core.
+Cost: per frame O(particles) numpy and scipy (pair search, periodic k-d trees, a few least-squares fits per seed):
+about 160 ms of CPU per frame for 2000 cells x 8 particles on the synthetic paper-scale test (under load), so a
+6-hour, 360-frame paper-scale trajectory takes about a minute on one core (not yet measured end to end).
 
-Limitations: velocities are speed x heading, so a cell pushed sideways or backwards in a jammed core is counted as
-moving along its heading; two counter-rotating aggregates that touch like gears can exchange a few edge cells (their
-edges move in parallel at the contact), which shifts centres by ~0.1 µm; a perfect aggregate needs >= 12 cells outside
-its core to pass the chance test; aggregate identities across frames use nearest centres only (merging and splitting
-aggregates end and start tracks).
+Limitations: detection uses the stored particle velocities; for trajectories without them, speed x forward tangent
+(a cell pushed sideways in a jammed core then counts as moving along its body); two counter-rotating aggregates that
+touch like gears can exchange a cell or two at the contact; a big aggregate still forming from several swirls may be
+found as several pieces; a handful of curled cells in a passive-following crowd can pass as a small (< 10 cells)
+aggregate; aggregate identities across frames use nearest centres only (merging and splitting aggregates end and
+start tracks).
 """
 from .aggregates import find_aggregates
 from .clusters import cell_clusters, connected_components, contact_pairs

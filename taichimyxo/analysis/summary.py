@@ -84,7 +84,7 @@ def analyze_frames(frames: Iterable[Frame], v_b: float = 4.0, **params) -> dict:
                         width_um=geo.W, cell_length_um=geo.cell_len)
             sbins = _size_bins(geo.n)
         lab, sizes, ci, cj = cell_clusters(geo.pos, geo.L, geo.W, P["contact_tol_um"])
-        aggs = find_aggregates(geo, (lab, sizes), v_b=v_b, **P)
+        aggs = find_aggregates(geo, (lab, sizes, ci, cj), v_b=v_b, **P)
         # time series
         ts["time_min"].append(geo.t_min)
         ts["mean_speed_um_per_min"].append(float(geo.cspeed.mean()))

@@ -12,7 +12,7 @@ from ..geometry import min_image
 
 def synthetic_frames(box=(200.0, 200.0), n_frames=1, dt_s=60.0, disks=(), streams=(), gas=0, gas_speed=4.0,
                      width=0.5, length=5.0, N=8, seed=0, strain=False, t0_s=0.0, jitter_deg=0.0,
-                     speed_noise=0.0, gas_avoids_disks=False) -> Iterator[Frame]:
+                     speed_noise=0.0, gas_avoids_disks=False, velocity=True, jams=()) -> Iterator[Frame]:
     """Trajectories with known answers (for tests and benchmarks).
 
     disks: dicts(centre=(x, y), radius=R, omega=rad/min (signed, > 0 counter-clockwise), r_in=1.5, speed=None):
@@ -26,7 +26,14 @@ def synthetic_frames(box=(200.0, 200.0), n_frames=1, dt_s=60.0, disks=(), stream
     gas: that many straight cells at random places and angles, moving along their headings at gas_speed; with
         gas_avoids_disks, none starts within R + length of a disk centre (they still cross disks later).
     jitter_deg, speed_noise: disk cells turned about their centres by a random angle of that SD (fixed per cell) and
-        particle speeds multiplied by (1 + speed_noise x standard normal), drawn anew each frame."""
+        particle speeds multiplied by (1 + speed_noise x standard normal), drawn anew each frame. A disk's
+        ``pitch_deg`` turns every cell of it by that fixed angle (> 0: heads point inward), cells moving along their
+        bodies: a spiral (cells circulate and drift inward).
+    jams: dicts(centre, radius, speed=0.5, ...): a jammed cluster: straight cells packed in rows W apart within the
+        radius, each at a random orientation (fixed), pushing slowly (speed) along its body in a random direction.
+    velocity: store particle velocities (µm/min): speed x the direction each particle moves (the tangent of its
+        circle for a disk cell, turned with the cell by jitter and pitch; the cell's axis for streams, gas and jams),
+        as trajectories with particles/velocity do; False: none (older trajectories)."""
     rng = np.random.default_rng(seed)
     L = np.asarray(box, float)
     l0 = (length - width) / (N - 1)
@@ -48,7 +55,8 @@ def synthetic_frames(box=(200.0, 200.0), n_frames=1, dt_s=60.0, disks=(), stream
                 th.append(th0 + 2 * math.pi * q / m)
         rr, th = np.array(rr), np.array(th)
         ke = np.where(rng.random(len(rr)) < 0.5, 1, -1).astype(np.int8)
-        jit = np.deg2rad(jitter_deg) * rng.standard_normal(len(rr))
+        jit = np.deg2rad(jitter_deg) * rng.standard_normal(len(rr)) + np.deg2rad(dk.get("pitch_deg", 0.0)) * \
+            (1.0 if float(dk["omega"]) >= 0 else -1.0)
         parts.append(("disk", dk, rr, th, ke, jit))
     for sd in streams:
         rows, per = int(sd["rows"]), int(sd["per_row"])
@@ -57,6 +65,23 @@ def synthetic_frames(box=(200.0, 200.0), n_frames=1, dt_s=60.0, disks=(), stream
         a, b = np.meshgrid(np.arange(per), np.arange(rows), indexing="ij")
         c0 = np.asarray(sd["origin"], float) + (a.ravel() * length)[:, None] * u + (b.ravel() * width)[:, None] * v
         parts.append(("stream", sd, c0, u))
+    for jd in jams:
+        R, c = float(jd["radius"]), np.asarray(jd["centre"], float)
+        g = np.arange(-R, R + 1e-9, max(width, 0.5 * length))
+        gx, gy = np.meshgrid(g, g)
+        cc = np.stack([gx.ravel(), gy.ravel()], 1)
+        cc = cc[np.hypot(cc[:, 0], cc[:, 1]) <= R - 0.5 * length]
+        # rows of cells along random directions per 2.5 µm patch: a dense, disordered (jammed) packing
+        ang = rng.uniform(0, math.pi, len(cc))
+        u = np.stack([np.cos(ang), np.sin(ang)], -1)
+        keep = np.ones(len(cc), bool)
+        for q in range(len(cc)):          # drop cells whose axes would cross an earlier one closer than W
+            if keep[q]:
+                d = np.hypot(*(cc[q + 1:] - cc[q]).T)
+                keep[q + 1:] &= d >= 0.5 * length
+        cc, u = cc[keep], u[keep]
+        ke = np.where(rng.random(len(cc)) < 0.5, 1, -1).astype(np.int8)
+        parts.append(("jam", jd, c + cc, u, ke))
     if gas:
         c0 = rng.uniform(0, 1, (gas, 2)) * L
         if gas_avoids_disks and disks:
@@ -74,7 +99,7 @@ def synthetic_frames(box=(200.0, 200.0), n_frames=1, dt_s=60.0, disks=(), stream
     for f in range(n_frames):
         t_s = t0_s + f * dt_s
         tm = t_s / 60.0
-        P_, K_, S_, E_ = [], [], [], []
+        P_, K_, S_, E_, V_ = [], [], [], [], []
         for part in parts:
             if part[0] == "disk":
                 _, dk, rr, th, ke, jit = part
@@ -86,14 +111,17 @@ def synthetic_frames(box=(200.0, 200.0), n_frames=1, dt_s=60.0, disks=(), stream
                 ang = th[:, None] + (wr * tm)[:, None] + sgn * (-j[None, :]) * (l0 / rr[:, None]) * ke[:, None]
                 c = np.asarray(dk["centre"], float)
                 pos = c + rr[:, None, None] * np.stack([np.cos(ang), np.sin(ang)], -1)
-                if jitter_deg:
+                tang = sgn * np.stack([-np.sin(ang), np.cos(ang)], -1)
+                if jit.any():
                     cc = pos.mean(1, keepdims=True)
                     co, si = np.cos(jit)[:, None], np.sin(jit)[:, None]
                     q = pos - cc
                     pos = cc + np.stack([co * q[..., 0] - si * q[..., 1], si * q[..., 0] + co * q[..., 1]], -1)
+                    tang = np.stack([co * tang[..., 0] - si * tang[..., 1], si * tang[..., 0] + co * tang[..., 1]], -1)
                 spd = np.repeat((np.abs(wr) * rr)[:, None], N, 1)
                 if speed_noise:
                     spd = spd * np.clip(1 + speed_noise * rng.standard_normal(spd.shape), 0, None)
+                V_.append(spd[..., None] * tang)
                 P_.append(pos)
                 K_.append(ke)
                 S_.append(spd)
@@ -105,7 +133,16 @@ def synthetic_frames(box=(200.0, 200.0), n_frames=1, dt_s=60.0, disks=(), stream
                 P_.append(pos)
                 K_.append(np.ones(len(c), np.int8))
                 S_.append(np.full((len(c), N), float(sd["speed"])))
+                V_.append(np.broadcast_to(float(sd["speed"]) * u, (len(c), N, 2)))
                 E_.append(np.zeros((len(c), N - 1)))
+            elif part[0] == "jam":
+                _, jd, c0, u, ke = part
+                pos = c0[:, None, :] - (j * l0)[None, :, None] * u[:, None, :]
+                P_.append(pos)
+                K_.append(ke)
+                S_.append(np.full((len(c0), N), float(jd.get("speed", 0.5))))
+                V_.append(np.repeat((float(jd.get("speed", 0.5)) * ke[:, None] * u)[:, None, :], N, 1))
+                E_.append(np.zeros((len(c0), N - 1)))
             else:
                 _, _, c0, ang, ke = part
                 u = np.stack([np.cos(ang), np.sin(ang)], -1)
@@ -114,10 +151,13 @@ def synthetic_frames(box=(200.0, 200.0), n_frames=1, dt_s=60.0, disks=(), stream
                 P_.append(pos)
                 K_.append(ke)
                 S_.append(np.full((len(c), N), float(gas_speed)))
+                V_.append(np.repeat((gas_speed * u)[:, None, :], N, 1))
                 E_.append(np.zeros((len(c), N - 1)))
         pos = np.concatenate(P_) if P_ else np.zeros((0, N, 2))
         pos = pos - np.floor(pos[:, :1] / L) * L
+        vel = (np.concatenate(V_).astype(np.float32) if V_ else np.zeros((0, N, 2), np.float32)) if velocity else None
         yield Frame(time_s=t_s, step=f, box=(float(L[0]), float(L[1])), width_um=width, positions=pos,
+                    particle_velocity=vel,
                     engine_direction=np.concatenate(K_).astype(np.int8),
                     particle_speed=np.concatenate(S_).astype(np.float32),
                     segment_strain=np.concatenate(E_) if strain else None, meta={"name": "synthetic"})
