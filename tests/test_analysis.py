@@ -414,3 +414,201 @@ def test_first_frame_without_speeds_is_geometry_only(tmp_path):
     (t,) = s["tracks"]
     assert t["n_frames"] == 2 and t["first_time_min"] == 1.0
     assert t["mean_omega_rad_per_min"] == pytest.approx(0.8, rel=1e-3)
+
+
+# ------------------------------------------------------------------------------------------------ tracking (issue 13)
+EVENT_DISKS = [
+    dict(centre=(25.0, 30.0), radius=7.25, omega=0.6, pool="m", t_off_min=4),          # A } merge at t = 4
+    dict(centre=(45.0, 30.0), radius=7.25, omega=0.6, pool="m", t_off_min=4),          # B }
+    dict(centre=(35.0, 30.0), radius=10.25, omega=0.6, pool="m", slot=0, t_on_min=4),  # C: A's and B's cells
+    dict(centre=(35.0, 100.0), radius=10.25, omega=-0.6, pool="s", t_off_min=3),       # F: splits at t = 3
+    dict(centre=(25.0, 100.0), radius=7.25, omega=-0.6, pool="s", slot=0, t_on_min=3),  # G } F's cells
+    dict(centre=(45.0, 100.0), radius=7.25, omega=-0.6, pool="s", t_on_min=3),          # H }
+    dict(centre=(110.0, 40.0), radius=6.25, omega=0.7, t_on_min=3),                     # D: appears at t = 3
+    dict(centre=(110.0, 110.0), radius=6.25, omega=0.7, t_off_min=5),                   # E: dissolves after t = 4
+    dict(centre=(80.0, 75.0), radius=6.25, omega=-0.7),                                 # K: always there
+]
+
+
+def _near(track, xy):
+    return _pdist(track["last"]["centre_um"], xy, (150.0, 150.0)) < 1.0
+
+
+def test_tracking_events_on_synthetic_trajectory(tmp_path):
+    """Aggregates linked by shared cells: a disk that appears (birth), two that become one (merge), one that becomes
+    two (split), one that dissolves (dispersal), and one that stays; lifetimes from the times seen."""
+    n_g = _n_disk_cells(**EVENT_DISKS[4])
+    disks = [dict(d, slot=n_g) if i == 5 else d for i, d in enumerate(EVENT_DISKS)]
+    path = str(tmp_path / "events.gsd")
+    write_synthetic(path, v_b=V_B, n_frames=8, box=(150.0, 150.0), disks=disks, jitter_deg=5, speed_noise=0.05,
+                    seed=4)
+    s = analyze(path, plots=False)
+    assert s["timeseries"]["n_aggregates"] == [5, 5, 5, 7, 6, 5, 5, 5]
+    lt = s["lifetimes"]
+    assert lt["events"] == {"birth": 1, "merge": 1, "split": 1, "dispersal": 1}
+    tr = {t["id"]: t for t in s["tracks"]}
+    assert len(tr) == 7
+    (birth,) = [e for e in s["events"] if e["type"] == "birth"]
+    d = tr[birth["tracks"][0]]
+    assert _near(d, (110.0, 40.0)) and d["first_time_min"] == 3.0 and d["lifetime_min"] == 4.0
+    assert d["start"] == "birth" and d["end"] == "end of run" and d["lifetime_censored"]
+    (merge,) = [e for e in s["events"] if e["type"] == "merge"]
+    assert merge["time_min"] == 4.0
+    kept, gone = tr[merge["into"]], tr[[t for t in merge["tracks"] if t != merge["into"]][0]]
+    assert _near(kept, (35.0, 30.0)) and kept["series"]["n_cells"][-1] == _n_disk_cells(**EVENT_DISKS[2])
+    assert gone["end"] == "merge" and gone["merged_into"] == kept["id"] and gone["last_time_min"] == 3.0
+    assert {tuple(np.round(c)) for c in (kept["series"]["centre_um"][0], gone["series"]["centre_um"][0])} == \
+        {(25.0, 30.0), (45.0, 30.0)}
+    (split,) = [e for e in s["events"] if e["type"] == "split"]
+    child, parent = tr[split["tracks"][1]], tr[split["split_from"]]
+    assert split["time_min"] == 3.0 and child["start"] == "split" and child["split_from"] == parent["id"]
+    assert np.round(parent["series"]["centre_um"][0]).tolist() == [35.0, 100.0]
+    assert {tuple(np.round(t["last"]["centre_um"])) for t in (child, parent)} == {(25.0, 100.0), (45.0, 100.0)}
+    (disp,) = [e for e in s["events"] if e["type"] == "dispersal"]
+    e = tr[disp["tracks"][0]]
+    assert _near(e, (110.0, 110.0)) and e["end"] == "dispersal" and e["lifetime_min"] == 4.0
+    k = [t for t in tr.values() if _near(t, (80.0, 75.0))][0]
+    assert k["n_frames"] == 8 and k["lifetime_min"] == 7.0 and k["start"] == "start of run"
+    # no track lives 10 min in an 8-frame run
+    assert lt["n_long_lived"] == 0 and lt["fraction_aggregate_frames_long_lived"] == 0.0
+    txt = format_summary(s)
+    assert "1 birth(s), 1 merge(s), 1 split(s), 1 dispersal(s)" in txt
+
+
+def test_link_tracks_bridges_gaps_and_needs_overlap():
+    from taichimyxo.analysis.tracking import lifetime_stats, link_tracks, track_summaries
+    agg = lambda t, m: dict(time_min=float(t), _members=np.asarray(m), radius_um=3.0, n_cells=len(m),  # noqa: E731
+                            omega_rad_per_min=1.0, edge_speed_um_per_min=5.0, edge_speed_vb=1.25, r2_origin=0.9,
+                            rigid=True, centre_um=[1.0, 1.0])
+    big = list(range(20))
+    # seen at t = 0, 1, missed at 2 (a flicker), seen at 3; a second aggregate sharing 1 of 10 cells is not linked
+    per_frame = [[agg(0, big)], [agg(1, big[2:])], [], [agg(3, big[1:]), agg(3, [19] + list(range(40, 49)))]]
+    tracks, events = link_tracks(per_frame, [0.0, 1.0, 2.0, 3.0], max_gap=2)
+    out = track_summaries(tracks, 3, 10.0)
+    assert [t["n_frames"] for t in out] == [3, 1]
+    assert [e["type"] for e in events] == ["birth"] and out[1]["start"] == "birth"
+    # a gap longer than max_gap ends the track (dispersal) and the return is a new birth
+    tracks, events = link_tracks(per_frame, [0.0, 1.0, 2.0, 3.0], max_gap=0)
+    assert [len(t["frames"]) for t in tracks] == [2, 1, 1]
+    assert sorted(e["type"] for e in events) == ["birth", "birth", "dispersal"]
+    # a frame without speeds (None) before the first measured one: aggregates there started with the run
+    tracks, events = link_tracks([None, [agg(1, big)], [agg(2, big)]], [0.0, 1.0, 2.0])
+    assert tracks[0]["start"] == "start of run" and events == []
+    st = lifetime_stats(track_summaries(tracks, 1, 1.0), events, 1.0)
+    assert st["fraction_aggregate_frames_long_lived"] == 1.0 and st["median_lifetime_min"] == 1.0
+
+
+def test_report_prints_velocity_fit_r2():
+    disk = dict(centre=(50.0, 50.0), radius=8.25, omega=0.8)
+    s = analyze_frames_public(synthetic_frames(box=(100.0, 100.0), n_frames=2, disks=[disk], jitter_deg=8,
+                                               speed_noise=0.1, seed=2))
+    (a,) = s["aggregates_final"]
+    txt = format_summary(s)
+    assert "R²(fit)" in txt and "R²(v∝r)" not in txt
+    row = [ln for ln in txt.splitlines() if f"{a['n_cells']:5d}" in ln][0]
+    assert f"{a['rotation_fit']['r2']:5.2f}" in row
+    assert "median R² of the fit v = ω × (r − c)" in txt
+
+
+def analyze_frames_public(frames):
+    from taichimyxo.analysis import analyze_frames
+    from taichimyxo.analysis.summary import json_clean
+    s = analyze_frames(frames, v_b=V_B)
+    out = json_clean({k: v for k, v in s.items() if not k.startswith("_")})
+    out["meta"]["trajectory"] = "synthetic"
+    return out
+
+
+# ------------------------------------------------------------------------------------------------ claims (issue 13)
+def _claims_runs(tmp_path):
+    """Three small runs standing for the paper's: active following (aggregates with the edge at 2 v_b, whatever
+    their size, living 11 min, strain inside), passive following (an aggregate living 1 min) and non-guided (gas)."""
+    paths = {}
+    cents = [(25.0, 25.0), (75.0, 25.0), (25.0, 75.0)]
+    radii = [6.25, 8.25, 10.25]
+    disks = [dict(centre=c, radius=R, omega=(-1) ** i * 2 * V_B / (R - 0.25)) for i, (c, R) in
+             enumerate(zip(cents, radii))]
+    common = dict(box=(100.0, 100.0), gas=60, gas_avoids_disks=True, seed=5)
+    paths["active"] = write_synthetic(str(tmp_path / "act.gsd"), v_b=V_B, n_frames=12, disks=disks, strain=True,
+                                      background_strain_J=1e-20, scene={"guiding": {"kind": "active"}}, **common)
+    paths["passive"] = write_synthetic(str(tmp_path / "pas.gsd"), v_b=V_B, n_frames=12,
+                                       disks=[dict(centre=(60.0, 60.0), radius=6.25, omega=0.6, t_on_min=5,
+                                                   t_off_min=7)],
+                                       scene={"guiding": {"kind": "passive"}}, **common)
+    paths["none"] = write_synthetic(str(tmp_path / "non.gsd"), v_b=V_B, n_frames=4,
+                                    scene={"guiding": {"kind": "none"}, "slime": {"enabled": False}}, **common)
+    return paths
+
+
+def test_claims_table_on_synthetic_runs(tmp_path):
+    import taichimyxo as tm
+    paths = _claims_runs(tmp_path)
+    out = tmp_path / "claims"
+    res = tm.claims([paths["active"], paths["passive"], paths["none"]], out_dir=out)
+    rows = {r["id"]: r for r in res["rows"]}
+    assert list(rows) == ["free_cell_speed", "speed_p95_guided_vs_non_guided", "fraction_in_aggregates",
+                          "rigid_rotation", "edge_speed_active", "edge_speed_adhesion", "edge_speed_slime",
+                          "edge_speed_vs_size", "aggregate_lifetimes", "strain_inside_vs_outside"]
+    assert {r["kind"] for r in res["runs"]} == {"active", "passive", "non-guided"}
+    # free (gas) cells move at v_b
+    assert rows["free_cell_speed"]["status"] == "consistent"
+    assert all(v["mean_vb"] == pytest.approx(1.0) for v in rows["free_cell_speed"]["values"].values())
+    # the edge speed is 2 v_b in every aggregate by construction; free cells 1 v_b
+    e = rows["edge_speed_active"]
+    assert e["values"]["mean_vb"] == pytest.approx(2.0, abs=0.15) and e["status"] == "consistent"
+    assert e["values"]["n_tracks"] == 3 and "act" in e["runs"] and "pas" not in e["runs"]
+    # missing runs name what they need instead of a number
+    for cid, scene in (("edge_speed_adhesion", "S4"), ("edge_speed_slime", "S16")):
+        assert rows[cid]["status"].startswith("needs") and scene in rows[cid]["measured"]
+    assert rows["speed_p95_guided_vs_non_guided"]["status"] == "consistent"
+    assert rows["rigid_rotation"]["values"]["act"]["median"] > 0.99
+    assert rows["rigid_rotation"]["status"] == "consistent"
+    reg = rows["edge_speed_vs_size"]["values"]["active"]
+    assert reg["n_aggregates"] == 3 and abs(reg["slope_um_per_min_per_um"]) < 2 * reg["stderr"] + 0.05
+    assert rows["fraction_in_aggregates"]["status"].startswith("consistent")
+    lt = rows["aggregate_lifetimes"]["values"]
+    assert lt["act"]["fraction_aggregate_frames_long_lived"] == 1.0
+    assert lt["pas"]["max_lifetime_min"] == 1.0 and lt["pas"]["fraction_aggregate_frames_long_lived"] == 0.0
+    assert rows["aggregate_lifetimes"]["status"] == "consistent"
+    st = rows["strain_inside_vs_outside"]
+    assert st["status"] == "consistent" and st["values"]["act"]["ratio"] > 10 and list(st["values"]) == ["act"]
+    # the files: markdown with a row per claim, CSV, JSON and the plots
+    md = (out / "claims.md").read_text()
+    assert md.count("\n| ") == 11            # header + 10 claims
+    with open(out / "claims.csv") as f:
+        import csv
+        assert len(list(csv.reader(f))) == 11
+    j = json.load(open(out / "claims.json"))
+    assert len(j["claims"]) == 10 and j["runs"][0]["label"] == "act"
+    pngs = [f for f in res["files"] if f.endswith(".png")]
+    assert len(pngs) >= 5 and all(os.path.getsize(p) > 1000 for p in pngs)
+    assert rows["edge_speed_vs_size"]["plot_file"].endswith("claims.edge_vs_radius.png")
+
+
+def test_claims_without_strain_or_passive_runs(tmp_path):
+    from taichimyxo.analysis.claims import claims
+    paths = _claims_runs(tmp_path)
+    res = claims([paths["none"]], out_dir=str(tmp_path / "o"), plots=False)
+    rows = {r["id"]: r for r in res["rows"]}
+    assert rows["strain_inside_vs_outside"]["measured"] == "not in these runs (no strain logged)"
+    assert rows["aggregate_lifetimes"]["status"].startswith("needs a passive following run")
+    assert rows["edge_speed_vs_size"]["status"].startswith("needs an active following run (S3")
+
+
+def test_claims_cli_bad_input_and_run(tmp_path, capsys):
+    paths = _claims_runs(tmp_path)
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "claims.md").write_text("earlier table\n")
+    bad = tmp_path / "bad.gsd"
+    bad.write_text("not a trajectory")
+    for argv in (["claims", paths["active"], str(tmp_path / "missing.gsd")], ["claims", str(bad)]):
+        assert cli_main(argv + ["--out", str(out)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and ("missing.gsd" in err or "bad.gsd" in err)
+    assert (out / "claims.md").read_text() == "earlier table\n" and sorted(os.listdir(out)) == ["claims.md"]
+    assert cli_main(["claims", paths["passive"], paths["none"], "--out", str(out), "--no-plots", "--every", "2"]) == 0
+    txt = capsys.readouterr().out
+    assert "Free cells" in txt and "wrote " + str(out / "claims.csv") in txt
+    j = json.load(open(out / "claims.json"))
+    assert [r["n_frames_analyzed"] for r in j["runs"]] == [6, 2]

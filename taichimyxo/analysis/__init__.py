@@ -40,11 +40,12 @@ aggregate; aggregate identities across frames use nearest centres only (merging 
 start tracks).
 """
 from .aggregates import find_aggregates
+from .claims import claims, format_claims
 from .clusters import cell_clusters, connected_components, contact_pairs
 from .params import DEFAULTS, PAPER
 from .report import format_summary
 from .summary import analyze, analyze_frames
 from .synthetic import synthetic_frames, write_synthetic
 
-__all__ = ["DEFAULTS", "PAPER", "analyze", "analyze_frames", "cell_clusters", "connected_components", "contact_pairs",
+__all__ = ["DEFAULTS", "PAPER", "analyze", "analyze_frames", "cell_clusters", "claims", "format_claims", "connected_components", "contact_pairs",
            "find_aggregates", "format_summary", "synthetic_frames", "write_synthetic"]
