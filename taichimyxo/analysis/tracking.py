@@ -5,8 +5,9 @@ Linking. An aggregate is a set of cells (its members), and cells keep their inde
 aggregates of successive analysed frames are the same aggregate, or parts of one, when they share cells: a link
 needs at least ``link_min_shared`` (2) shared cells and at least ``link_overlap`` (30 %) of the smaller aggregate's
 members. A track whose aggregate is missing for up to ``max_gap_frames`` analysed frames (detection flickers) is
-still linked when it reappears. Links are taken largest overlap first; each track continues into at most one
-aggregate and each aggregate continues at most one track; the remaining links are events:
+still linked when it reappears. Links are taken oldest track first, then largest overlap (so when two aggregates
+merge the elder continues, and an aggregate found as two pieces for a frame keeps its identity); each track continues
+into at most one aggregate and each aggregate continues at most one track; the remaining links are events:
 
 - birth: an aggregate linked to no earlier one starts a track;
 - merge (two -> one): a track whose aggregate shares cells with an aggregate that continues another track ends there
@@ -78,7 +79,9 @@ def link_tracks(per_frame: list[list[dict]], times: list[float] | None = None, m
                 k = _shared(mt, ma)
                 if k >= link_min_shared and k >= link_overlap * min(len(mt), len(ma)):
                     links.append((k, tid, ai))
-        links.sort(key=lambda x: (-x[0], x[1], x[2]))
+        # the older track first (when two merge, the elder continues: a one-frame split of an aggregate into two
+        # pieces and back keeps its identity), then its largest overlap
+        links.sort(key=lambda x: (tracks[x[1]]["frames"][0][0], -x[0], x[1], x[2]))
         cont_t, cont_a = {}, {}
         for k, tid, ai in links:
             if tid not in cont_t and ai not in cont_a:
@@ -92,7 +95,7 @@ def link_tracks(per_frame: list[list[dict]], times: list[float] | None = None, m
         for tid, ais in linked_t.items():
             if tid in cont_t:
                 continue
-            ai = ais[0]                                       # largest overlap first
+            ai = max(ais, key=lambda a_: next(k for k, t_, b_ in links if t_ == tid and b_ == a_))
             into = cont_a.get(ai)
             if into is not None:
                 tracks[tid]["merged_into"] = into
