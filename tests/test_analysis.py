@@ -496,6 +496,12 @@ def test_link_tracks_bridges_gaps_and_needs_overlap():
     assert tracks[0]["start"] == "start of run" and events == []
     st = lifetime_stats(track_summaries(tracks, 1, 1.0), events, 1.0)
     assert st["fraction_aggregate_frames_long_lived"] == 1.0 and st["median_lifetime_min"] == 1.0
+    # found as two pieces for one frame, then whole again: the elder track continues (a split, then a merge back)
+    piece_a, piece_b = list(range(10)) + list(range(30, 35)), list(range(10, 20))
+    tracks, events = link_tracks([[agg(0, big)], [agg(1, piece_a), agg(1, piece_b)], [agg(2, list(range(5)) + piece_b)]],
+                                 [0.0, 1.0, 2.0])
+    assert [len(t["frames"]) for t in tracks] == [3, 1] and [e["type"] for e in events] == ["split", "merge"]
+    assert tracks[1]["end"] == "merge" and tracks[1]["merged_into"] == 0
 
 
 def test_report_prints_velocity_fit_r2():
