@@ -15,6 +15,7 @@
   taichimyxo.triggers); returns the :class:`taichimyxo.driver.Run` (status, steps, wall time).
 - :func:`render_frame`: one Frame to an image; :func:`render_movie`: a trajectory to a movie and a panel.
 - :func:`analyze`: what ``python -m taichimyxo analyze`` does (taichimyxo.analysis).
+- :func:`claims`: what ``python -m taichimyxo claims`` does: the paper's claims measured on runs, as one table.
 - :func:`run_scene`: what ``python -m taichimyxo scene`` does (every output, --resume, the summary).
 """
 from __future__ import annotations
@@ -126,6 +127,28 @@ def analyze(trajectory, out_dir=None, *, every: int = 1, v_b: float | None = Non
     check_trajectory(os.fspath(trajectory))
     from .analysis import analyze as analyze_trajectory
     return analyze_trajectory(os.fspath(trajectory), out_dir=out_dir, every=every, v_b=v_b, plots=plots)
+
+
+def claims(trajectories, out_dir=None, *, every: int = 1, v_b: float | None = None, plots: bool = True,
+           progress=None) -> dict:
+    """The paper's claims measured on one or more GSD trajectories (what ``python -m taichimyxo claims`` does):
+    claims.md, claims.csv, claims.json and a plot per claim in out_dir (default: the current folder). Returns
+    dict(rows, runs, files); each row: claim, measured, paper, status, runs. Every file is checked (a missing file
+    or one that is not a trajectory of cells is a TrajectoryError) and the output folder proved writable before any
+    analysis; the tables are replaced only by complete ones."""
+    from .scene_run import check_output_dir
+    from .trajectory import TrajectoryError, check_trajectory
+    if isinstance(trajectories, (str, os.PathLike)):
+        trajectories = [trajectories]
+    paths = [os.fspath(p) for p in trajectories]
+    if not paths:
+        raise TrajectoryError("claims needs at least one trajectory")
+    for p in paths:
+        check_trajectory(p)
+    check_output_dir(os.fspath(out_dir) if out_dir else ".")
+    from .analysis.claims import claims as measure_claims
+    return measure_claims(paths, out_dir=os.fspath(out_dir) if out_dir else None, every=every, v_b=v_b, plots=plots,
+                          progress=progress)
 
 
 def run_scene(scene: Scene, out_dir: str = "videos", **options) -> dict:

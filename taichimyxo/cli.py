@@ -1,4 +1,4 @@
-"""Command line: python -m taichimyxo {list, keys, scene, render, analyze, videos}.
+"""Command line: python -m taichimyxo {list, keys, scene, render, analyze, claims, videos}.
 
 Bad input is one line on stderr naming the problem and a non-zero exit (2), before any simulation starts.
 Exit status: 0 done, 2 bad input, 3 a run stopped because its state broke a numerical invariant, 130 interrupted."""
@@ -103,6 +103,14 @@ def _build_parser() -> argparse.ArgumentParser:
     a.add_argument("--every", type=int, default=1, help="analyse every K-th frame")
     a.add_argument("--v-b", type=float, default=None, help="free-cell speed, µm/min (default: from the scene, or 4)")
     a.add_argument("--no-plots", action="store_true", help="write the JSON summary only")
+
+    c = sub.add_parser("claims", help="the paper's claims measured on runs, one table (markdown, CSV, JSON + plots)")
+    c.add_argument("trajectories", nargs="+", metavar="RUN.gsd", help="GSD trajectories written by taichimyxo; each "
+                   "run's guiding (non-guided, passive, active, adhesion, slime) is read from the scene it stores")
+    c.add_argument("--out", help="output folder for claims.md/.csv/.json and claims.*.png (default: current folder)")
+    c.add_argument("--every", type=_positive_int, default=1, help="analyse every K-th frame")
+    c.add_argument("--v-b", type=float, default=None, help="free-cell speed, µm/min (default: each run's scene)")
+    c.add_argument("--no-plots", action="store_true", help="the tables only")
 
     v = sub.add_parser("videos", help="regenerate the supplementary videos S1-S17")
     v.add_argument("--preview", action="store_true")
@@ -236,6 +244,16 @@ def cmd_analyze(args) -> int:
     return 0
 
 
+def cmd_claims(args) -> int:
+    from .analysis.claims import format_claims
+    from .api import claims
+    res = claims(args.trajectories, out_dir=args.out, every=args.every, v_b=args.v_b, plots=not args.no_plots,
+                 progress=lambda msg: print(msg, file=sys.stderr))
+    print(format_claims(res["rows"]))
+    print("".join(f"wrote {p}\n" for p in res["files"]), end="")
+    return 0
+
+
 def cmd_videos(args) -> int:
     from .videos import regenerate
     return regenerate(preview=args.preview, only=args.only, out_dir=args.out, arch=args.arch)
@@ -254,6 +272,8 @@ def main(argv: list[str] | None = None) -> int:
             return cmd_render(args)
         if args.cmd == "analyze":
             return cmd_analyze(args)
+        if args.cmd == "claims":
+            return cmd_claims(args)
         if args.cmd == "videos":
             return cmd_videos(args)
     except (SceneError, TrajectoryError) as e:

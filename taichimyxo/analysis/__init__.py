@@ -14,6 +14,9 @@ Public API
   calls it.
 - ``analyze_frames(frames, v_b=4.0, **params) -> dict``: the same on an iterable of ``Frame`` (no files).
 - ``format_summary(summary) -> str``: a short human-readable report.
+- ``claims(paths, out_dir=None, every=1, v_b=None, plots=True) -> dict``: the paper's claims measured on several runs
+  as one table (claims.md, .csv, .json, claims.<name>.png); ``python -m taichimyxo claims RUN.gsd ...`` calls it
+  (``claims`` module: the claims, how each is measured and judged). ``format_claims(rows)``: the table as text.
 - Building blocks, usable on their own: ``contact_pairs``, ``connected_components``, ``cell_clusters``,
   ``find_aggregates`` (one frame).
 - ``synthetic_frames(...)``, ``write_synthetic(...)``: trajectories with known answers (rotating disks, straight
@@ -22,27 +25,33 @@ Public API
 Parts (each module's docstring holds its definitions, criteria and thresholds; all defaults in ``DEFAULTS``, every
 one can be overridden by keyword): ``params`` (DEFAULTS, the paper's numbers), ``cells`` (per-frame cell geometry:
 centres, headings, tangents, speeds), ``clusters`` (contacts, clusters of touching cells), ``aggregates`` (rotating
-aggregates in one frame and their measurement), ``tracking`` (aggregates across frames, the size-independence
-regression), ``summary`` (a whole trajectory, the JSON), ``report`` (the text), ``plots`` (the PNGs), ``synthetic``
+aggregates in one frame and their measurement), ``tracking`` (aggregates across frames by shared cells: births,
+merges, splits, dispersals, lifetimes; the size-independence regression), ``claims`` (the paper's claims table),
+``summary`` (a whole trajectory, the JSON), ``report`` (the text), ``plots`` (the PNGs), ``synthetic``
 (test data), ``stats`` (least squares, binomial tail).
 
 Everything is periodic (minimum image in the box (Lx, Ly)); positions are µm, speeds µm/min, times min.
 
-Cost: per frame O(particles) numpy (pair search, bincounts, a few dozen candidate walks): about 35 ms of CPU for
-2000 cells x 8 particles, so a 6-hour, 360-frame paper-scale trajectory takes ~12 s (+1.5 s for the plots) on one core.
+Cost: per frame O(particles) numpy and scipy (pair search, periodic k-d trees, a few least-squares fits per seed):
+a 6-hour, 360-frame synthetic paper-scale trajectory (2000 cells x 8 particles, 10 aggregates, strain logged) takes
+31 s wall end to end with the plots (``nice -n 19 python -m taichimyxo analyze paper360.gsd``, one core busy, the
+2-core machine under a load of about 4), about 83 ms per frame.
 
-Limitations: velocities are speed x heading, so a cell pushed sideways or backwards in a jammed core is counted as
-moving along its heading; two counter-rotating aggregates that touch like gears can exchange a few edge cells (their
-edges move in parallel at the contact), which shifts centres by ~0.1 µm; a perfect aggregate needs >= 12 cells outside
-its core to pass the chance test; aggregate identities across frames use nearest centres only (merging and splitting
-aggregates end and start tracks).
+Limitations: detection uses the stored particle velocities; for trajectories without them, speed x forward tangent
+(a cell pushed sideways in a jammed core then counts as moving along its body); two counter-rotating aggregates that
+touch like gears can exchange a cell or two at the contact; a big aggregate still forming from several swirls may be
+found as several pieces; a handful of curled cells in a passive-following crowd can pass as a small (< 10 cells)
+aggregate; tracks need the cells' indices to persist through the trajectory (they do in ours); a lifetime is
+censored by the start and end of the run (flagged per track).
 """
 from .aggregates import find_aggregates
+from .claims import claims, format_claims
 from .clusters import cell_clusters, connected_components, contact_pairs
 from .params import DEFAULTS, PAPER
 from .report import format_summary
 from .summary import analyze, analyze_frames
 from .synthetic import synthetic_frames, write_synthetic
 
-__all__ = ["DEFAULTS", "PAPER", "analyze", "analyze_frames", "cell_clusters", "connected_components", "contact_pairs",
+__all__ = ["DEFAULTS", "PAPER", "analyze", "analyze_frames", "cell_clusters", "claims", "format_claims",
+           "connected_components", "contact_pairs",
            "find_aggregates", "format_summary", "synthetic_frames", "write_synthetic"]

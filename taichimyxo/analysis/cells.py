@@ -3,7 +3,10 @@
 Per cell: centre = mean of its particles (wrapped into the box); heading = k_e (p_0 - p_{N-1}) normalised (tail to
 head); per-particle forward tangent = -k_e d p / d i (central differences along the chain); cell speed = mean of its
 particle speeds (the logged, window-averaged speeds). Velocities are taken as speed x heading (not from finite
-differences between frames: at one frame per minute an aggregate edge turns by up to ~1 rad between frames)."""
+differences between frames: at one frame per minute an aggregate edge turns by up to ~1 rad between frames).
+Particle velocities (``vel``, µm/min): the trajectory's windowed velocities where it stores them (particles/velocity),
+else speed x forward tangent (a cell sliding along its own body), so that older files and frames without velocities
+are analysed the same way."""
 from __future__ import annotations
 
 import numpy as np
@@ -46,3 +49,5 @@ class CellGeometry:
         # windowed particle velocities (µm/min) where the trajectory stores them: a rotation is fitted to vectors
         self.pvel = (None if getattr(fr, "particle_velocity", None) is None
                      else np.asarray(fr.particle_velocity, float).reshape(self.n, self.N, 2))
+        self.vel = self.pvel if self.pvel is not None else self.pspeed[..., None] * self.ptan
+        self.cvel = self.vel.mean(axis=1) if self.N else np.zeros((self.n, 2))

@@ -5,21 +5,27 @@ import numpy as np
 
 DEFAULTS = dict(
     contact_tol_um=0.3,        # contact when particle distance < W + tol
-    min_cells=10,              # smallest cluster that votes / smallest aggregate
+    min_cells=5,               # smallest aggregate (cells)
     max_radius_um=40.0,        # largest aggregate radius searched (clamped to 0.45 of the box)
-    hough_bin_um=1.0,          # Hough grid bin
-    ring_um=None,              # ring-walk ring width; None: 2 W
-    core_radius_um=None,       # core exempt from the tangential test; None: L / 2
-    min_occupancy=0.25,        # ring area occupancy needed to continue the walk
-    cos_tangent=0.8,           # heading within acos(0.8) = 36.9° of the tangent counts as circulating
-    min_ring_circulating=0.5,  # fraction of a ring's particles circulating
-    ring_gap=1,                # the walk bridges this many consecutive bad rings when a good one follows
-    min_circulating=0.6,       # fraction of (non-core) member cells circulating
-    min_octants=6,             # octants covered by circulating members
-    max_p_value=1e-8,          # chance that randomly oriented cells circulate that well (binomial tail)
+    min_cell_speed_vb=0.1,     # a cell slower than this x v_b gives no rotation centre and circulates about none
+    seed_radius_um=1.5,        # cells' own rotation centres this close count together (3 W)
+    min_seed_cells=3,          # own centres needed for a seed
+    max_seeds=400,             # seeds per frame and sense at most
+    centre_tol=1.0,            # a cell's own centre must lie within this x its distance from the aggregate centre
+    refine_iterations=3,       # assignment / centre refinement / merge rounds
+    merge_circulation=0.75,    # two groups of one sense merge when their union circulates this well (see min_circulation)
+    ring_um=None,              # ring width of the speed-vs-radius profile; None: 2 W
+    core_radius_um=None,       # core: cells closer to the centre join without the tangential test; None: L / 2
+    cos_tangent=0.8,           # velocity within acos(0.8) = 36.9° of the tangent counts as circulating
+    min_coverage=0.75,         # fraction of 16 angular sectors the member particles cover
+    min_circulation=0.5,       # mean cos(angle between velocity and the tangent) over member particles
+    min_inside_fraction=0.4,   # members among the cells inside the aggregate
+    min_circulation_r2=0.5,    # fraction of the velocity variance that is circulation about the centre
     edge_fraction=0.2,         # outer fraction of member cells (by radius) that defines the edge speed
-    max_candidates=40,         # Hough candidates verified per frame
     max_gap_frames=2,          # tracking: analysed frames an aggregate may be missed
+    link_overlap=0.3,          # tracking: shared cells / members of the smaller aggregate for a link
+    link_min_shared=2,         # tracking: shared cells for a link at least
+    stable_lifetime_min=10.0,  # tracking: a track living this long (min) is long-lived ("stable")
     min_track_frames=3,        # tracking: frames a track needs to enter the across-aggregate regression
     speed_hist_max=24.0,       # µm/min, upper edge of the speed histograms
     speed_hist_bin=0.5,        # µm/min

@@ -9,6 +9,15 @@ def fmt(x, spec=".2f"):
     return "n/a" if x is None or (isinstance(x, float) and not math.isfinite(x)) else format(x, spec)
 
 
+def _fit_r2(a: dict):
+    """R² of the aggregate's fit of v = ω × (r − c) to its particle velocities (None without velocities)."""
+    return (a.get("rotation_fit") or {}).get("r2")
+
+
+def _pct(x):
+    return None if x is None else 100.0 * x
+
+
 def format_summary(summary: dict) -> str:
     """Short human-readable report of an analyze() summary."""
     m = summary["meta"]
@@ -26,17 +35,25 @@ def format_summary(summary: dict) -> str:
     t = summary.get("final_time_min")
     lines.append(f"{len(fin)} rotating aggregate(s)" + (f" at t = {t:.1f} min" if t is not None else ""))
     if fin:
-        lines.append("    centre (µm)        R (µm)  cells  ω (rad/min)  edge (µm/min)  edge/v_b  R²(v∝r)  rigid")
+        lines.append("    centre (µm)        R (µm)  cells  ω (rad/min)  edge (µm/min)  edge/v_b  R²(fit)  rigid")
         for a in sorted(fin, key=lambda a: -a["n_cells"]):
             c = a["centre_um"]
             lines.append(f"  ({c[0]:7.1f}, {c[1]:7.1f})  {a['radius_um']:6.1f}  {a['n_cells']:5d}  "
                          f"{fmt(a['omega_rad_per_min'], '+8.3f')}     {fmt(a['edge_speed_um_per_min'], '6.2f')}"
-                         f"        {fmt(a['edge_speed_vb'], '5.2f')}    {fmt(a['r2_origin'], '5.2f')}   "
+                         f"        {fmt(a['edge_speed_vb'], '5.2f')}    {fmt(_fit_r2(a), '5.2f')}   "
                          f"{'yes' if a['rigid'] else 'no'}")
     pr = summary["predictions"]
     st = [tr for tr in summary["tracks"] if tr["stable"]]
     lines.append(f"{len(summary['tracks'])} aggregate track(s), {len(st)} seen in >= "
                  f"{summary.get('min_track_frames_effective', summary['parameters']['min_track_frames'])} frame(s)")
+    lt = summary.get("lifetimes")
+    if lt and lt["n_tracks"]:
+        ev = lt["events"]
+        lines.append(f"tracks by shared cells: {ev['birth']} birth(s), {ev['merge']} merge(s), {ev['split']} split(s), "
+                     f"{ev['dispersal']} dispersal(s); lifetime median {fmt(lt['median_lifetime_min'], '.0f')}, "
+                     f"longest {fmt(lt['max_lifetime_min'], '.0f')} min; "
+                     f"{fmt(_pct(lt['fraction_aggregate_frames_long_lived']), '.0f')} % of aggregate-frames in tracks "
+                     f"living >= {lt['stable_lifetime_min']:g} min")
     if pr.get("edge_speed_vb_mean") is not None:
         lines.append(f"edge speed / v_b over tracks: mean {pr['edge_speed_vb_mean']:.2f} "
                      f"(paper: adhesion 1.33, active following up to 4, slime trails ~1)")
@@ -48,8 +65,10 @@ def format_summary(summary: dict) -> str:
                      f"log-log exponent {fmt(reg['loglog_exponent'], '.2f')}")
     rr = pr["rigid_rotation"]
     if rr["n_aggregate_frames"]:
-        lines.append(f"rigid rotation: {rr['fraction_rigid'] * 100:.0f} % of aggregate-frames rigid, median R² "
-                     f"{fmt(rr['r2_origin_median'], '.2f')}, median ω_fit/ω_tan "
+        q = rr.get("rotation_fit_r2_quartiles") or [None, None]
+        lines.append(f"rigid rotation: median R² of the fit v = ω × (r − c) {fmt(rr.get('rotation_fit_r2_median'))} "
+                     f"(quartiles {fmt(q[0])}-{fmt(q[1])}, {rr.get('n_rotation_fits', 0)} aggregate-frames); "
+                     f"{rr['fraction_rigid'] * 100:.0f} % rigid by speed ∝ r, median ω_fit/ω_tan "
                      f"{fmt(rr['omega_fit_over_omega_tan_median'], '.2f')}")
     sh = summary["speed_histograms"]
     if sh["mean_inside"] is not None:

@@ -27,7 +27,7 @@ from .cells import CellGeometry
 from .clusters import cell_clusters
 from .params import PAPER, R_BINS, fill_cell_defaults, parameters
 from .plots import write_plots
-from .tracking import link_tracks, public, size_regression, track_summaries
+from .tracking import lifetime_stats, link_tracks, public, size_regression, track_summaries
 
 
 def json_clean(o):
@@ -62,7 +62,9 @@ def analyze_frames(frames: Iterable[Frame], v_b: float = 4.0, **params) -> dict:
     t0 = time.perf_counter()
     ts = dict(time_min=[], mean_speed_um_per_min=[], polar_order=[], nematic_order=[], local_polar_order=[],
               local_nematic_order=[], n_clusters=[], largest_cluster=[], mean_cluster_size_weighted=[],
-              fraction_in_clusters=[], n_aggregates=[], fraction_in_aggregates=[])
+              fraction_in_clusters=[], n_aggregates=[], fraction_in_aggregates=[], free_cell_speed_um_per_min=[],
+              n_free_cells=[], speed_p95_um_per_min=[], strain_inside_aggregates_J=[],
+              strain_outside_aggregates_J=[])
     per_frame: list[list[dict]] = []
     size_dist = []
     hist_edges = np.arange(0.0, P["speed_hist_max"] + 1e-9, P["speed_hist_bin"])
@@ -84,7 +86,7 @@ def analyze_frames(frames: Iterable[Frame], v_b: float = 4.0, **params) -> dict:
                         width_um=geo.W, cell_length_um=geo.cell_len)
             sbins = _size_bins(geo.n)
         lab, sizes, ci, cj = cell_clusters(geo.pos, geo.L, geo.W, P["contact_tol_um"])
-        aggs = find_aggregates(geo, (lab, sizes), v_b=v_b, **P)
+        aggs = find_aggregates(geo, (lab, sizes, ci, cj), v_b=v_b, **P)
         # time series
         ts["time_min"].append(geo.t_min)
         ts["mean_speed_um_per_min"].append(float(geo.cspeed.mean()))
@@ -110,12 +112,24 @@ def analyze_frames(frames: Iterable[Frame], v_b: float = 4.0, **params) -> dict:
             inside[a["_members"]] = True
         ts["n_aggregates"].append(len(aggs))
         ts["fraction_in_aggregates"].append(float(inside.mean()))
+        if geo.strain is not None:
+            # mean segment strain energy (J) of cells in aggregates and of the others
+            e = geo.strain.mean(axis=1)
+            ts["strain_inside_aggregates_J"].append(float(e[inside].mean()) if inside.any() else float("nan"))
+            ts["strain_outside_aggregates_J"].append(float(e[~inside].mean()) if (~inside).any() else float("nan"))
+        free = csize == 1
+        ts["n_free_cells"].append(int(free.sum()))
         last_geo = (geo, aggs)
         if not np.any(geo.pspeed > 0):
             # no speeds yet (the first frame of a run: the speed window has not elapsed): geometry only
             no_speed.append(geo.t_min)
-            per_frame.append([])
+            per_frame.append(None)
+            ts["free_cell_speed_um_per_min"].append(float("nan"))
+            ts["speed_p95_um_per_min"].append(float("nan"))
             continue
+        # free cells: touching no other cell (clusters of one)
+        ts["free_cell_speed_um_per_min"].append(float(geo.cspeed[free].mean()) if free.any() else float("nan"))
+        ts["speed_p95_um_per_min"].append(float(np.percentile(geo.cspeed, 95.0)))
         for a in aggs:
             sprof[0] += a["_speed_prof"][0]
             sprof[1] += a["_speed_prof"][1]
@@ -147,10 +161,14 @@ def _summarise(P, v_b, t0, ts, per_frame, size_dist, sbins, hist_edges, h_in, h_
     n_fr = len(per_frame)
     L = np.array(meta["box_um"])
     min_tf = min(P["min_track_frames"], n_fr)
-    track_out = track_summaries(link_tracks(per_frame, L, P["max_gap_frames"]), min_tf)
+    tracks, events = link_tracks(per_frame, ts["time_min"], P["max_gap_frames"], P["link_overlap"],
+                                 P["link_min_shared"])
+    track_out = track_summaries(tracks, min_tf, P["stable_lifetime_min"])
+    lifetimes = lifetime_stats(track_out, events, P["stable_lifetime_min"])
     stable = [t for t in track_out if t["stable"]]
     final = last_agg_frame[1] if last_agg_frame else []
-    all_aggs = [a for fa in per_frame for a in fa]
+    all_aggs = [a for fa in per_frame if fa for a in fa]
+    r2v = [a["rotation_fit"]["r2"] for a in all_aggs if a.get("rotation_fit")]
     ratio = [a["omega_fit_over_omega_tan"] for a in all_aggs]
     predictions = dict(
         paper=PAPER,
@@ -170,6 +188,10 @@ def _summarise(P, v_b, t0, ts, per_frame, size_dist, sbins, hist_edges, h_in, h_
             omega_fit_over_omega_tan_median=float(np.nanmedian(ratio)) if all_aggs else None,
             speed_grows_with_radius_fraction=float(np.mean([a["linear_fit"]["slope"] > 0 for a in all_aggs]))
             if all_aggs else None,
+            rotation_fit_r2_median=float(np.nanmedian(r2v)) if r2v else None,
+            rotation_fit_r2_quartiles=[float(np.nanpercentile(r2v, 25)), float(np.nanpercentile(r2v, 75))]
+            if r2v else None,
+            n_rotation_fits=len(r2v),
         ),
     )
     reg = predictions["edge_speed_vs_radius_tracks"]
@@ -204,6 +226,8 @@ def _summarise(P, v_b, t0, ts, per_frame, size_dist, sbins, hist_edges, h_in, h_
         final_time_min=(last_agg_frame[0].t_min if last_agg_frame else None),
         aggregates_final=[public(a) for a in final],
         tracks=track_out,
+        events=events,
+        lifetimes=lifetimes,
         predictions=predictions,
         timeseries=ts,
         cluster_size_distribution=dict(size_bin_edges=sbins, fraction_of_cells=np.array(size_dist),
