@@ -36,7 +36,9 @@ particles' velocities (or speed x forward tangent where a trajectory stores none
    its variance in the mean, a jammed cluster has random directions; and >= ``min_inside_fraction`` (60 %) of the
    cells whose centroid lies within 0.9 of the members' largest centroid distance, not counting members of other
    groups, are members (a chance vortex in a
-   dense, disordered crowd has most cells inside it going other ways). Then each accepted aggregate takes the
+   dense, disordered crowd has most cells inside it going other ways). An accepted group lying wholly inside a larger
+   one (centre distance + its disk radius <= the larger one's), of either sense, is a swirl within that aggregate and
+   is dropped (a person counts the large aggregate once). Then each accepted aggregate takes the
    still-unassigned cells whose centroid lies inside half its outer radius and that touch its members (the slow,
    jammed core a person counts in the aggregate).
 
