@@ -36,7 +36,9 @@ particles' velocities (or speed x forward tangent where a trajectory stores none
    its variance in the mean, a jammed cluster has random directions; and >= ``min_inside_fraction`` (60 %) of the
    cells whose centroid lies within 0.9 of the members' largest centroid distance, not counting members of other
    groups, are members (a chance vortex in a
-   dense, disordered crowd has most cells inside it going other ways). Then each accepted aggregate takes the
+   dense, disordered crowd has most cells inside it going other ways). An accepted group lying wholly inside a larger
+   one (centre distance + its disk radius <= the larger one's), of either sense, is a swirl within that aggregate and
+   is dropped (a person counts the large aggregate once). Then each accepted aggregate takes the
    still-unassigned cells whose centroid lies inside half its outer radius and that touch its members (the slow,
    jammed core a person counts in the aggregate).
 
@@ -298,7 +300,27 @@ def _accept(geo, c, sense, cells, P, others=None):
     return ok, dict(members=cells, d=dc, r=rc, circ=circ,
                     f_circ=float(circ.sum() / outer.sum()) if outer.any() else 1.0,
                     coverage=coverage, circulation=circulation, circulation_r2=r2c, inside_fraction=f_in,
-                    R_edge=float(rr.max()), R_inner=float(rr.min()))
+                    R_edge=float(rr.max()), R_inner=float(rr.min()), R_disk=_disk_radius(rr))
+
+
+def _disk_radius(rr: np.ndarray) -> float:
+    """Outer radius of the uniform disk or annulus with the particles' second moment (see _measure)."""
+    a = float(np.percentile(rr, 2.0))
+    return math.sqrt(max(2.0 * float((rr * rr).mean()) - a * a, 0.0))
+
+
+def _drop_nested(accepted, C, L):
+    """Accepted groups lying wholly inside a larger one (centre distance + own disk radius <= the larger one's disk
+    radius), either sense: swirls within an aggregate, which a person counts as part of it, not as aggregates."""
+    order = sorted(range(len(accepted)), key=lambda q: -accepted[q][1]["R_disk"])
+    kept = []
+    for q in order:
+        k, info = accepted[q]
+        inside = any(float(np.hypot(*min_image(C[k] - C[j], L))) + info["R_disk"] <= ij["R_disk"]
+                     for j, ij in kept)
+        if not inside:
+            kept.append((k, info))
+    return sorted(kept, key=lambda x: x[0])
 
 
 def _profile(r_over_R: np.ndarray, weights: np.ndarray):
@@ -409,6 +431,7 @@ def find_aggregates(geo_or_frame, clusters=None, v_b: float = 4.0, **params) -> 
         ok, info = _accept(geo, C[k], int(S[k]), cells, P, others=(lab >= 0) & (lab != k))
         if ok:
             accepted.append((k, info))
+    accepted = _drop_nested(accepted, C, L)
     # the enclosed core: unassigned cells inside half the outer radius that touch a member
     free = np.ones(geo.n, bool)
     for k, info in accepted:
