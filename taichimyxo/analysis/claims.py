@@ -48,69 +48,10 @@ import os
 
 import numpy as np
 
-from .summary import analyze_frames, json_clean
-
-MIN_RIGID_CELLS = 20
-
-KINDS = {  # kind -> (label, the scene to run for it)
-    "non-guided": ("non-guided", "S1 (guiding.kind = none, slime off)"),
-    "passive": ("passive following", "S2 (guiding.kind = passive)"),
-    "active": ("active following", "S3 (guiding.kind = active)"),
-    "adhesion": ("adhesion", "S4 (guiding.kind = adhesion)"),
-    "slime": ("slime trails", "S16 or S17 (slime.enabled = true)"),
-}
-
-
-def run_kind(scene: dict) -> str:
-    """The guiding of a stored scene: slime (slime trails on), else guiding.kind (none -> non-guided)."""
-    if (scene.get("slime") or {}).get("enabled"):
-        return "slime"
-    k = str((scene.get("guiding") or {}).get("kind", "none"))
-    return "non-guided" if k == "none" else k
-
-
-def needs(*kinds: str) -> str:
-    art = lambda w: "an" if w[0] in "aeiou" else "a"       # noqa: E731
-    return "needs " + " and ".join(f"{art(KINDS[k][0])} {KINDS[k][0]} run ({KINDS[k][1]})" for k in kinds)
-
-
-def _mse(x):
-    """(mean, standard error, n) of the finite values of x."""
-    x = np.asarray([v for v in x if v is not None], float)
-    x = x[np.isfinite(x)]
-    n = len(x)
-    if n == 0:
-        return float("nan"), float("nan"), 0
-    return float(x.mean()), float(x.std(ddof=1) / math.sqrt(n)) if n > 1 else float("nan"), n
-
-
-def _pm(m, se, spec=".2f"):
-    if not math.isfinite(m):
-        return "n/a"
-    return f"{m:{spec}} ± {se:{spec}}" if math.isfinite(se) else f"{m:{spec}}"
-
-
-def load_runs(paths, every: int = 1, v_b: float | None = None, progress=None, **params) -> list[dict]:
-    """Analyse each trajectory. Every path is checked first (a missing or unreadable file is a TrajectoryError before
-    any analysis). Returns dicts(label, path, kind, v_b, summary, scene)."""
-    from ..trajectory import check_trajectory, read_frames, read_scene
-    paths = [os.fspath(p) for p in paths]
-    if not paths:
-        raise ValueError("claims needs at least one trajectory")
-    scenes = []
-    for p in paths:
-        check_trajectory(p)
-        scenes.append(read_scene(p))
-    labels = [os.path.splitext(os.path.basename(p))[0] for p in paths]
-    runs = []
-    for p, sc, lab in zip(paths, scenes, labels):
-        if progress:
-            progress(f"analysing {p}")
-        vb = v_b if v_b is not None else float((sc.get("cell") or {}).get("speed_um_per_min", 4.0) or 4.0)
-        s = analyze_frames(read_frames(p, every=every), v_b=vb, **params)
-        label = lab if labels.count(lab) == 1 else p
-        runs.append(dict(label=label, path=os.path.abspath(p), kind=run_kind(sc), v_b=vb, summary=s, scene=sc))
-    return runs
+from .claim_plots import write_claim_plots
+from .claim_runs import (KINDS, MIN_RIGID_CELLS, free_speed, load_runs, mean_se, needs, plus_minus, runs_of,
+                         stable_tracks)
+from .summary import json_clean
 
 
 def _describe(r) -> str:
@@ -125,19 +66,6 @@ def _row(cid, claim, paper, runs, measured, status, values, plot=None):
                 values=values, plot=plot)
 
 
-def _of(runs, *kinds):
-    return [r for r in runs if r["kind"] in kinds]
-
-
-def _stable_tracks(r):
-    return [t for t in r["summary"]["tracks"] if t["stable"]]
-
-
-def _free_speed(r):
-    ts = r["summary"]["timeseries"]
-    return _mse(np.asarray(ts["free_cell_speed_um_per_min"], float) / r["v_b"])
-
-
 def evaluate(runs: list[dict]) -> list[dict]:
     """The claims table (list of row dicts: id, claim, measured, paper, runs, status, values, plot)."""
     from .tracking import size_regression
@@ -147,10 +75,10 @@ def evaluate(runs: list[dict]) -> list[dict]:
     # 1. free cells move at v_b
     vals, parts = {}, []
     for r in runs:
-        m, se, n = _free_speed(r)
+        m, se, n = free_speed(r)
         nf = int(np.nansum(r["summary"]["timeseries"]["n_free_cells"]))
         vals[r["label"]] = dict(mean_vb=m, se=se, n_frames=n, free_cell_frames=nf)
-        parts.append(f"{r['label']}: {_pm(m, se)} v_b" if n else f"{r['label']}: no free cells")
+        parts.append(f"{r['label']}: {plus_minus(m, se)} v_b" if n else f"{r['label']}: no free cells")
     ok = [v for v in vals.values() if v["n_frames"]]
     status = ("no free cells in these runs" if not ok else
               "consistent" if all(abs(v["mean_vb"] - 1) <= 0.05 + 2 * np.nan_to_num(v["se"]) for v in ok)
@@ -162,11 +90,11 @@ def evaluate(runs: list[dict]) -> list[dict]:
     # 2. 95th percentile of cell speed, guided vs non-guided
     vals, parts = {}, []
     for r in runs:
-        m, se, n = _mse(np.asarray(r["summary"]["timeseries"]["speed_p95_um_per_min"], float) / r["v_b"])
+        m, se, n = mean_se(np.asarray(r["summary"]["timeseries"]["speed_p95_um_per_min"], float) / r["v_b"])
         vals[r["label"]] = dict(kind=r["kind"], mean_vb=m, se=se, n_frames=n)
-        parts.append(f"{label(r)} {r['label']}: {_pm(m, se)} v_b")
-    g = [vals[r["label"]]["mean_vb"] for r in _of(runs, "active", "adhesion")]
-    ng = [vals[r["label"]]["mean_vb"] for r in _of(runs, "non-guided")]
+        parts.append(f"{label(r)} {r['label']}: {plus_minus(m, se)} v_b")
+    g = [vals[r["label"]]["mean_vb"] for r in runs_of(runs, "active", "adhesion")]
+    ng = [vals[r["label"]]["mean_vb"] for r in runs_of(runs, "non-guided")]
     if not ng:
         parts.append("non-guided: " + needs("non-guided"))
     status = (needs(*([] if g else ["active"]) + ([] if ng else ["non-guided"])) if not (g and ng) else
@@ -185,9 +113,9 @@ def evaluate(runs: list[dict]) -> list[dict]:
         sd = float(f[q].std(ddof=1)) if len(f[q]) > 1 else float("nan")
         vals[r["label"]] = dict(kind=r["kind"], mean=float(f[q].mean()), sd=sd, final=float(f[-1]),
                                 from_min=float(t[q][0]), to_min=float(t[-1]))
-        parts.append(f"{label(r)} {r['label']}: {_pm(float(f[q].mean()), sd)} (t = {t[q][0]:.0f}-{t[-1]:.0f} min)")
-    hi = [vals[r["label"]]["mean"] for r in _of(runs, "active", "adhesion")]
-    lo = [vals[r["label"]]["mean"] for r in _of(runs, "passive", "non-guided")]
+        parts.append(f"{label(r)} {r['label']}: {plus_minus(float(f[q].mean()), sd)} (t = {t[q][0]:.0f}-{t[-1]:.0f} min)")
+    hi = [vals[r["label"]]["mean"] for r in runs_of(runs, "active", "adhesion")]
+    lo = [vals[r["label"]]["mean"] for r in runs_of(runs, "passive", "non-guided")]
     status = (needs(*([] if hi else ["active"]) + ([] if lo else ["passive"])) if not (hi and lo) else
               "consistent (ordering; the paper gives no number)" if min(hi) > max(lo) else "not consistent")
     rows.append(_row("fraction_in_aggregates", "Fraction of cells in rotating aggregates (mean ± SD, last quarter)",
@@ -210,7 +138,7 @@ def evaluate(runs: list[dict]) -> list[dict]:
                      f"{len(r2)} aggregate-frames)")
         if r["kind"] in ("active", "adhesion"):
             judged += r2
-    sr = _of(runs, "active", "adhesion")
+    sr = runs_of(runs, "active", "adhesion")
     status = (needs("active") if not sr else f"no aggregate of >= {MIN_RIGID_CELLS} cells" if not judged else
               "consistent" if float(np.median(judged)) >= 0.8 else "not consistent")
     rows.append(_row("rigid_rotation", f"Aggregates rotate as rigid bodies (R² of v = ω × (r − c), aggregates of "
@@ -227,18 +155,18 @@ def evaluate(runs: list[dict]) -> list[dict]:
                  "rigid cells S16; flexible cells S17 form small short-lived aggregates)",
     }
     for kind in ("active", "adhesion", "slime"):
-        rs = _of(runs, kind)
-        ev = [t["mean_edge_speed_vb"] for r in rs for t in _stable_tracks(r)]
-        fs = [_free_speed(r)[0] for r in rs]
+        rs = runs_of(runs, kind)
+        ev = [t["mean_edge_speed_vb"] for r in rs for t in stable_tracks(r)]
+        fs = [free_speed(r)[0] for r in rs]
         fs = float(np.nanmean(fs)) if rs and np.isfinite(fs).any() else float("nan")
-        m, se, n = _mse(ev)
+        m, se, n = mean_se(ev)
         vals = dict(mean_vb=m, se=se, n_tracks=n, free_cell_speed_vb=fs, per_track=ev)
         if not rs:
             measured, status = needs(kind), needs(kind)
         elif not n:
             measured, status = "no aggregate seen in >= 3 frames", "no aggregates in these runs"
         else:
-            measured = (f"{_pm(m, se)} v_b ({_pm(m * rs[0]['v_b'], se * rs[0]['v_b'], '.1f')} µm/min), SE over {n} "
+            measured = (f"{plus_minus(m, se)} v_b ({plus_minus(m * rs[0]['v_b'], se * rs[0]['v_b'], '.1f')} µm/min), SE over {n} "
                         f"tracks; free cells {fs:.2f} v_b")
             s2 = 2 * np.nan_to_num(se)
             if kind == "active":
@@ -254,8 +182,8 @@ def evaluate(runs: list[dict]) -> list[dict]:
     # 8. edge speed vs aggregate size
     vals, parts, stats = {}, [], []
     for kind in ("active", "adhesion"):
-        rs = _of(runs, kind)
-        tr = [t for r in rs for t in _stable_tracks(r)]
+        rs = runs_of(runs, kind)
+        tr = [t for r in rs for t in stable_tracks(r)]
         if not rs:
             parts.append(f"{KINDS[kind][0]}: {needs(kind)}")
             continue
@@ -266,16 +194,16 @@ def evaluate(runs: list[dict]) -> list[dict]:
         if len(tr) < 3:
             parts.append(f"{KINDS[kind][0]}: {len(tr)} track(s), too few for a slope")
             continue
-        parts.append(f"{KINDS[kind][0]}: slope {_pm(reg['slope_um_per_min_per_um'], reg['stderr'], '.3f')} µm/min "
+        parts.append(f"{KINDS[kind][0]}: slope {plus_minus(reg['slope_um_per_min_per_um'], reg['stderr'], '.3f')} µm/min "
                      f"per µm (t = {reg['t']:.1f}) over {len(tr)} tracks, R = {reg['radius_range_um'][0]:.1f}-"
                      f"{reg['radius_range_um'][1]:.1f} µm")
         stats.append(reg["consistent_with_zero"])
-    status = (needs("active") if not _of(runs, "active", "adhesion") else
+    status = (needs("active") if not runs_of(runs, "active", "adhesion") else
               "too few tracks (>= 3 needed)" if not stats else
               "consistent" if all(stats) else "not consistent")
     rows.append(_row("edge_speed_vs_size", "Edge speed vs aggregate radius (slope ± SE over tracks)",
                      "edge speed appears not to depend on the aggregate size (so larger aggregates turn slower)",
-                     _of(runs, "active", "adhesion"), "; ".join(parts), status, vals, plot="edge_vs_radius"))
+                     runs_of(runs, "active", "adhesion"), "; ".join(parts), status, vals, plot="edge_vs_radius"))
 
     # 9. lifetimes, passive vs active
     vals, parts = {}, []
@@ -292,7 +220,7 @@ def evaluate(runs: list[dict]) -> list[dict]:
         else:
             parts.append(f"{label(r)} {r['label']}: no aggregates")
     fr = lambda rs: [vals[r["label"]]["fraction_aggregate_frames_long_lived"] or 0.0 for r in rs]  # noqa: E731
-    pas, act = fr(_of(runs, "passive")), fr(_of(runs, "active", "adhesion"))
+    pas, act = fr(runs_of(runs, "passive")), fr(runs_of(runs, "active", "adhesion"))
     status = (needs(*([] if pas else ["passive"]) + ([] if act else ["active"])) if not (pas and act) else
               "consistent" if max(pas) < min(act) else "not consistent")
     stable_min = runs[0]["summary"]["parameters"]["stable_lifetime_min"] if runs else 10
@@ -311,11 +239,11 @@ def evaluate(runs: list[dict]) -> list[dict]:
         a = np.asarray(ts["strain_inside_aggregates_J"], float)
         b = np.asarray(ts["strain_outside_aggregates_J"], float)
         with np.errstate(invalid="ignore", divide="ignore"):
-            m, se, n = _mse(np.where(b > 0, a / b, np.nan))
+            m, se, n = mean_se(np.where(b > 0, a / b, np.nan))
         sp = r["summary"].get("strain_profile") or {}
         vals[r["label"]] = dict(kind=r["kind"], ratio=m, se=se, n_frames=n, inner_over_outer=sp.get("inner_over_outer"))
         io_ = sp.get("inner_over_outer")
-        parts.append(f"{label(r)} {r['label']}: inside / outside {_pm(m, se)} over {n} frames" +
+        parts.append(f"{label(r)} {r['label']}: inside / outside {plus_minus(m, se)} over {n} frames" +
                      (f"; inner (r < R/2) / outer {io_:.2f}" if io_ is not None and math.isfinite(io_) else ""))
     if not vals:
         measured = "not in these runs (no strain logged)"
@@ -396,140 +324,3 @@ def claims(paths, out_dir: str | None = None, every: int = 1, v_b: float | None 
     _write(paths_out["csv"], to_csv(rows))
     _write(paths_out["json"], json.dumps(json_clean(doc), indent=1))
     return dict(rows=json_clean(rows), runs=run_info, files=list(paths_out.values()) + files)
-
-
-def write_claim_plots(runs: list[dict], rows: list[dict], base: str) -> list[str]:
-    """One figure per claim that has a picture; sets row["plot_file"]. Returns the paths."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    files = {}
-
-    def save(fig, name):
-        f = f"{base}.{name}.png"
-        tmp = f"{base}.{name}.tmp-{os.getpid()}.png"
-        fig.savefig(tmp, dpi=90)
-        plt.close(fig)
-        os.replace(tmp, f)
-        files[name] = f
-
-    lab = lambda r: f"{r['label']} ({KINDS.get(r['kind'], (r['kind'],))[0]})"     # noqa: E731
-    wanted = {r["plot"] for r in rows if r["plot"]}
-
-    if "speed" in wanted:
-        fig, ax = plt.subplots(figsize=(7, 4.5), constrained_layout=True)
-        for i, r in enumerate(runs):
-            h = r["summary"]["speed_histograms"]
-            e = np.asarray(h["bin_edges_um_per_min"]) / r["v_b"]
-            c = np.asarray(h["inside_aggregates"], float) + np.asarray(h["outside_aggregates"], float)
-            if c.sum():
-                ax.stairs(c / c.sum() / np.diff(e), e, color=f"C{i}", label=lab(r))
-            p95 = np.nanmean(np.asarray(r["summary"]["timeseries"]["speed_p95_um_per_min"], float)) / r["v_b"]
-            if math.isfinite(p95):
-                ax.axvline(p95, color=f"C{i}", ls="--", lw=1)
-        ax.axvline(1.0, color="k", ls=":", label="v_b")
-        ax.set(xlabel="cell speed / v_b", ylabel="density", yscale="log",
-               title="cell speeds, all frames (dashed: mean 95th percentile)")
-        ax.legend(fontsize=8)
-        save(fig, "speed")
-
-    if "fraction" in wanted:
-        fig, ax = plt.subplots(figsize=(7, 4.5), constrained_layout=True)
-        for i, r in enumerate(runs):
-            ts = r["summary"]["timeseries"]
-            ax.plot(ts["time_min"], ts["fraction_in_aggregates"], color=f"C{i}", label=lab(r))
-        ax.set(xlabel="time (min)", ylabel="fraction of cells in rotating aggregates", ylim=(0, 1))
-        ax.legend(fontsize=8)
-        save(fig, "fraction")
-
-    if "rigid" in wanted:
-        fig, ax = plt.subplots(figsize=(7, 4.5), constrained_layout=True)
-        data, names = [], []
-        for r in runs:
-            r2 = [x for t in r["summary"]["tracks"] for x, n in zip(t["series"]["rotation_fit_r2"],
-                                                                    t["series"]["n_cells"])
-                  if x is not None and n >= MIN_RIGID_CELLS]
-            if r2:
-                data.append(r2)
-                names.append(lab(r))
-        if data:
-            ax.boxplot(data)
-            ax.set_xticks(range(1, len(names) + 1), names, fontsize=8)
-        else:
-            ax.text(0.5, 0.5, f"no aggregates of >= {MIN_RIGID_CELLS} cells", ha="center", transform=ax.transAxes)
-        ax.axhline(0.8, color="k", ls=":")
-        ax.set(ylabel="R² of v = ω × (r − c)", title=f"rigid rotation, aggregate-frames (>= {MIN_RIGID_CELLS} cells)")
-        save(fig, "rigid")
-
-    if "edge_speed" in wanted:
-        fig, ax = plt.subplots(figsize=(7, 4.5), constrained_layout=True)
-        for x, kind in enumerate(("active", "adhesion", "slime")):
-            ev = [t["mean_edge_speed_vb"] for r in _of(runs, kind) for t in _stable_tracks(r)]
-            if ev:
-                ax.scatter(x + 0.08 * np.random.default_rng(0).standard_normal(len(ev)), ev, s=12, alpha=0.6,
-                           color=f"C{x}")
-                m, se, _ = _mse(ev)
-                ax.errorbar(x + 0.25, m, yerr=2 * np.nan_to_num(se), fmt="ks", ms=5)
-            else:
-                ax.text(x, 1.0, "no run", ha="center")
-        for y, name, c in ((4.0, "active max 4", "C0"), (4 / 3, "adhesion 4/3", "C1"), (1.0, "v_b (slime, free)", "k")):
-            ax.axhline(y, color=c, ls=":", label=name)
-        ax.set_xticks([0, 1, 2], [KINDS[k][0] for k in ("active", "adhesion", "slime")])
-        ax.set(ylabel="edge speed / v_b (per track)", title="edge speed (square: mean ± 2 SE over tracks)")
-        ax.legend(fontsize=8)
-        save(fig, "edge_speed")
-
-    if "edge_vs_radius" in wanted:
-        fig, ax = plt.subplots(figsize=(7, 4.5), constrained_layout=True)
-        reg_row = next(r for r in rows if r["id"] == "edge_speed_vs_size")
-        for i, kind in enumerate(("active", "adhesion")):
-            tr = [t for r in _of(runs, kind) for t in _stable_tracks(r)]
-            if not tr:
-                continue
-            R = np.array([t["mean_radius_um"] for t in tr])
-            E = np.array([t["mean_edge_speed_um_per_min"] for t in tr])
-            ax.scatter(R, E, s=14, color=f"C{i}", label=f"{KINDS[kind][0]} tracks")
-            reg = reg_row["values"].get(kind)
-            if reg and len(tr) >= 3 and math.isfinite(reg["slope_um_per_min_per_um"]):
-                rr = np.linspace(R.min(), R.max(), 10)
-                ax.plot(rr, reg["intercept_um_per_min"] + reg["slope_um_per_min_per_um"] * rr, color=f"C{i}",
-                        label=f"fit: {reg['slope_um_per_min_per_um']:.3f} ± {reg['stderr']:.3f} µm/min per µm")
-        vb = runs[0]["v_b"] if runs else 4.0
-        ax.axhline(vb, color="k", ls=":", label="v_b")
-        ax.set(xlabel="aggregate radius R (µm, track mean)", ylabel="edge speed (µm/min, track mean)",
-               title="edge speed vs aggregate size")
-        ax.legend(fontsize=8)
-        save(fig, "edge_vs_radius")
-
-    if "lifetimes" in wanted:
-        fig, ax = plt.subplots(figsize=(7, 4.5), constrained_layout=True)
-        allv = [t["lifetime_min"] for r in runs for t in r["summary"]["tracks"]]
-        top = max(allv + [1.0])
-        bins = np.arange(0, top + 2, max(1.0, math.ceil(top / 30)))
-        for i, r in enumerate(runs):
-            life = [t["lifetime_min"] for t in r["summary"]["tracks"]]
-            if life:
-                ax.hist(life, bins=bins, histtype="step", lw=1.5, color=f"C{i}", label=lab(r))
-        st = runs[0]["summary"]["parameters"]["stable_lifetime_min"] if runs else 10
-        ax.axvline(st, color="k", ls=":", label=f"{st:g} min")
-        ax.set(xlabel="track lifetime (min; tracks alive at the start or end are censored)", ylabel="tracks",
-               yscale="log", title="aggregate lifetimes")
-        ax.legend(fontsize=8)
-        save(fig, "lifetimes")
-
-    if "strain" in wanted:
-        fig, ax = plt.subplots(figsize=(7, 4.5), constrained_layout=True)
-        for i, r in enumerate(runs):
-            ts = r["summary"]["timeseries"]
-            if ts["strain_inside_aggregates_J"]:
-                ax.plot(ts["time_min"], ts["strain_inside_aggregates_J"], color=f"C{i}", label=f"{lab(r)} inside")
-                ax.plot(ts["time_min"], ts["strain_outside_aggregates_J"], color=f"C{i}", ls="--", label="outside")
-        ax.set(xlabel="time (min)", ylabel="mean segment strain energy (J)", yscale="log",
-               title="strain energy in and out of rotating aggregates")
-        ax.legend(fontsize=8)
-        save(fig, "strain")
-
-    for r in rows:
-        r["plot_file"] = files.get(r["plot"]) if r["plot"] else None
-    return list(files.values())
