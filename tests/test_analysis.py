@@ -653,3 +653,28 @@ def test_claims_cli_bad_input_and_run(tmp_path, capsys):
     assert "Free cells" in txt and "wrote " + str(out / "claims.csv") in txt
     j = json.load(open(out / "claims.json"))
     assert [r["n_frames_analyzed"] for r in j["runs"]] == [6, 2]
+
+
+def test_series_se_allows_for_correlated_frames():
+    """Batch-means SE of a time series: like the naive SE for independent values, several times larger for
+    strongly correlated ones (AR(1), rho = 0.9: the exact inflation is sqrt(1.9 / 0.1) = 4.4)."""
+    from taichimyxo.analysis.stats import series_mean_se
+    rng = np.random.default_rng(3)
+
+    def ratio(rho):
+        out = []
+        for _ in range(60):
+            e = rng.standard_normal(400)
+            x = np.empty(400)
+            x[0] = e[0]
+            for t in range(1, 400):
+                x[t] = rho * x[t - 1] + math.sqrt(1 - rho * rho) * e[t]
+            m, se, n = series_mean_se(x)
+            assert n == 400 and abs(m - x.mean()) < 1e-12
+            out.append(se / (x.std(ddof=1) / math.sqrt(n)))
+        return float(np.mean(out))
+
+    assert 0.8 < ratio(0.0) < 1.2
+    assert 2.8 < ratio(0.9) < 5.0
+    assert math.isnan(series_mean_se([1.0, 2.0, 3.0])[1])            # too few frames for batches
+    assert series_mean_se([np.nan, None])[2] == 0

@@ -7,6 +7,7 @@ import os
 
 import numpy as np
 
+from .stats import series_mean_se
 from .summary import analyze_frames
 
 MIN_RIGID_CELLS = 20
@@ -82,4 +83,4 @@ def stable_tracks(r):
 
 def free_speed(r):
     ts = r["summary"]["timeseries"]
-    return mean_se(np.asarray(ts["free_cell_speed_um_per_min"], float) / r["v_b"])
+    return series_mean_se(np.asarray(ts["free_cell_speed_um_per_min"], float) / r["v_b"])

@@ -6,8 +6,9 @@ stored (non-guided, passive following, active following, adhesion, slime trails)
 whose runs are missing names the kind of run it needs instead of a number. The command line is
 ``python -m taichimyxo claims RUN.gsd [RUN.gsd ...] [--out DIR]``.
 
-The claims (Janulevicius et al. 2015) and how each is measured; "± SE" over frames treats successive frames as
-independent, which they are not (a lower bound), "± SE over tracks" over aggregates followed in time:
+The claims (Janulevicius et al. 2015) and how each is measured; "± SE" over frames is by batch means
+(stats.series_mean_se: blocks of sqrt(n) successive frames, so the correlation of successive frames widens it; NaN
+below 8 frames), "± SE over tracks" over aggregates followed in time:
 
 1. free_cell_speed: cells touching no other cell (clusters of one) move at v_b. Per run: the mean over frames of
    their mean speed / v_b ± SE over frames. Consistent when within 5 % (+ 2 SE) of 1.
@@ -51,6 +52,7 @@ import numpy as np
 from .claim_plots import write_claim_plots
 from .claim_runs import (KINDS, MIN_RIGID_CELLS, free_speed, load_runs, mean_se, needs, plus_minus, runs_of,
                          stable_tracks)
+from .stats import series_mean_se
 from .summary import json_clean
 
 
@@ -90,7 +92,7 @@ def evaluate(runs: list[dict]) -> list[dict]:
     # 2. 95th percentile of cell speed, guided vs non-guided
     vals, parts = {}, []
     for r in runs:
-        m, se, n = mean_se(np.asarray(r["summary"]["timeseries"]["speed_p95_um_per_min"], float) / r["v_b"])
+        m, se, n = series_mean_se(np.asarray(r["summary"]["timeseries"]["speed_p95_um_per_min"], float) / r["v_b"])
         vals[r["label"]] = dict(kind=r["kind"], mean_vb=m, se=se, n_frames=n)
         parts.append(f"{label(r)} {r['label']}: {plus_minus(m, se)} v_b")
     g = [vals[r["label"]]["mean_vb"] for r in runs_of(runs, "active", "adhesion")]
@@ -239,7 +241,7 @@ def evaluate(runs: list[dict]) -> list[dict]:
         a = np.asarray(ts["strain_inside_aggregates_J"], float)
         b = np.asarray(ts["strain_outside_aggregates_J"], float)
         with np.errstate(invalid="ignore", divide="ignore"):
-            m, se, n = mean_se(np.where(b > 0, a / b, np.nan))
+            m, se, n = series_mean_se(np.where(b > 0, a / b, np.nan))
         sp = r["summary"].get("strain_profile") or {}
         vals[r["label"]] = dict(kind=r["kind"], ratio=m, se=se, n_frames=n, inner_over_outer=sp.get("inner_over_outer"))
         io_ = sp.get("inner_over_outer")

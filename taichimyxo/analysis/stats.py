@@ -1,4 +1,5 @@
-"""The statistics the analysis needs: ordinary least squares, a rigid-rotation fit and a binomial tail."""
+"""The statistics the analysis needs: ordinary least squares, a rigid-rotation fit, a binomial tail and the standard
+error of a time series's mean (batch means)."""
 from __future__ import annotations
 
 import math
@@ -64,3 +65,25 @@ def rigid_rotation_fit(r, v):
         out["omega"] = float(omega)
         out["centre"] = [float(-bb / omega), float(a / omega)]
     return out
+
+
+def series_mean_se(x):
+    """(mean, standard error, n) of the finite values of a time series, the SE by non-overlapping batch means.
+
+    Successive frames of a run are correlated (an aggregate lives for many frames), so the naive SE, SD / sqrt(n),
+    is too small by about sqrt((1 + rho) / (1 - rho)) for lag-one correlation rho. Batch means (Flegal & Jones 2010):
+    split the series into k = n // b batches of b = floor(sqrt(n)) consecutive values; SE = SD of the batch means /
+    sqrt(k), consistent when the correlation time is short against b. Measured on AR(1) series of 400 values
+    (tests/test_analysis.py): white noise gives 1.0x the naive SE, rho = 0.5 1.6x (exact 1.7), rho = 0.9 3.3x
+    (exact 4.4: batches of 20 frames still understate a correlation time of ~20 frames). Below 8 values there are too few batches: NaN."""
+    x = np.asarray([v for v in x if v is not None], float)
+    x = x[np.isfinite(x)]
+    n = len(x)
+    if n == 0:
+        return float("nan"), float("nan"), 0
+    if n < 8:
+        return float(x.mean()), float("nan"), n
+    b = int(math.isqrt(n))
+    k = n // b
+    means = x[n - k * b:].reshape(k, b).mean(axis=1)           # the latest k * b values, in time order
+    return float(x.mean()), float(means.std(ddof=1) / math.sqrt(k)), n
