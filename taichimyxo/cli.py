@@ -133,15 +133,34 @@ def _build_parser() -> argparse.ArgumentParser:
 EXECUTOR_NAMES = ("local", "slurm")           # taichimyxo.sweep.driver.EXECUTORS (not imported: keep the CLI light)
 
 
+# --executor slurm's options on the command line: (flag, [slurm] key, type, metavar, help);
+# taichimyxo.sweep.slurm.OPTIONS has them all (the sweep file's [slurm] table takes any of those)
+SLURM_FLAGS = (("--partition", "partition", str, "NAME", "partition (default: the cluster's default)"),
+               ("--account", "account", str, "NAME", "account to charge"),
+               ("--time-min", "time_min", _positive_int, "MIN", "time limit per run, minutes (default 60); a run "
+                "that needs longer is requeued and resumes from its checkpoint"),
+               ("--cpus-per-task", "cpus_per_task", _positive_int, "N", "CPUs (Taichi threads) per run (default 1)"),
+               ("--mem-gb", "mem_gb", float, "GB", "memory per run, GB (default 4)"))
+
+
 def _executor_arguments(p, jobs_help: str) -> None:
     p.add_argument("--executor", default="local", choices=EXECUTOR_NAMES,
                    help="local: processes on this machine (default); slurm: jobs on a Slurm cluster")
-    p.add_argument("--jobs", type=_positive_int, help=jobs_help)
+    p.add_argument("--jobs", type=_positive_int, help=jobs_help + "; with slurm: jobs running at once (default: "
+                                                              "as many as the cluster starts)")
+    g = p.add_argument_group("--executor slurm", "(override the sweep file's [slurm] table)")
+    for flag, key, kind, metavar, text in SLURM_FLAGS:
+        g.add_argument(flag, dest=f"slurm_{key}", type=kind, metavar=metavar, help=text)
 
 
 def executor_options(args) -> dict:
     """The executor's options given on the command line (they update the sweep file's [local] / [slurm] table)."""
-    return {}
+    given = {key: getattr(args, f"slurm_{key}") for _, key, _, _, _ in SLURM_FLAGS
+             if getattr(args, f"slurm_{key}", None) is not None}
+    if given and args.executor != "slurm":
+        flags = [f for f, key, _, _, _ in SLURM_FLAGS if key in given]
+        raise SceneError(f"{', '.join(flags)}: only with --executor slurm")
+    return given
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -280,9 +299,9 @@ def cmd_claims(args) -> int:
 
 def cmd_videos(args) -> int:
     from .videos import regenerate
-    jobs = args.jobs or (1 if args.executor == "local" else os.cpu_count() or 1)
+    jobs = args.jobs or (1 if args.executor == "local" else 0)     # 0: the executor's default
     return regenerate(preview=args.preview, only=args.only, out_dir=args.out, arch=args.arch,
-                      executor=args.executor, jobs=jobs)
+                      executor=args.executor, jobs=jobs, options=executor_options(args))
 
 
 def cmd_sweep(args) -> int:

@@ -11,6 +11,7 @@ for that one. A failed video is reported and the others go on."""
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 import time
@@ -38,7 +39,7 @@ def _up_to_date(sc: Scene, out: Path) -> bool:
 
 
 def regenerate(preview: bool = False, only: str | None = None, out_dir: str = "videos", arch: str = "cpu",
-               executor: str = "local", jobs: int = 1) -> int:
+               executor: str = "local", jobs: int = 1, options: dict | None = None) -> int:
     names = VIDEO_SCENES
     if only:
         # any scene `list` shows (the supplementary videos S1-S17 and the figure panels such as S2FigA)
@@ -53,13 +54,14 @@ def regenerate(preview: bool = False, only: str | None = None, out_dir: str = "v
     scenes = [(n, Scene.load(n, {}, preview=preview)) for n in names]      # validate all before running any
     todo = [(n, sc) for n, sc in scenes if not _up_to_date(sc, out)]
     ex = None
-    if executor != "local" or jobs > 1:
+    if executor != "local" or jobs != 1:
         from .sweep.driver import executor_module
         ex = executor_module(executor)          # a missing executor is bad input, before anything runs
     print(f"videos: {len(scenes) - len(todo)} of {len(scenes)} up to date in {out}; {len(todo)} to make",
           flush=True)
     if ex is not None:
-        return in_parallel([sc for _, sc in todo], out, arch, ex, jobs)
+        return in_parallel([sc for _, sc in todo], out, arch, ex, jobs or getattr(ex, "DEFAULT_JOBS", None)
+                           or os.cpu_count() or 1, options or {})
     t0 = time.time()
     for i, (name, sc) in enumerate(todo, 1):
         cmd = [sys.executable, "-m", "taichimyxo", "scene", name, "--out", str(out), "--arch", arch]
@@ -80,13 +82,13 @@ def regenerate(preview: bool = False, only: str | None = None, out_dir: str = "v
     return 0
 
 
-def in_parallel(scenes: list, out: Path, arch: str, ex, jobs: int) -> int:
+def in_parallel(scenes: list, out: Path, arch: str, ex, jobs: int, options: dict | None = None) -> int:
     """The videos through the executor module `ex` (taichimyxo.sweep.driver), `jobs` at a time; those that can reuse
-    an earlier one's trajectory (the same physics and seed: S8 and S3) in a second wave. Exit status: 0, 1 when a
-    video failed, 130 when interrupted."""
+    an earlier one's trajectory (the same physics and seed: S8 and S3) in a second wave; options: the executor's
+    (from the command line). Exit status: 0, 1 when a video failed, 130 when interrupted."""
     from .sweep.progress import SweepProgress
     from .sweep.rundir import prepare_job
-    opts = ex.check_options({}) if hasattr(ex, "check_options") else {}
+    opts = ex.check_options(dict(options or {})) if hasattr(ex, "check_options") else {}
     first, second, seen = [], [], set()
     for sc in scenes:
         (second if sc.fingerprint() in seen else first).append(sc)

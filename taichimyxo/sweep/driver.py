@@ -55,8 +55,9 @@ def plan(path, out=None) -> tuple:
 def run_sweep(path, executor: str = "local", jobs: int | None = None, out=None, dry_run: bool = False,
               options: dict | None = None, stream=None) -> dict:
     """Run the sweep file at `path` (taichimyxo/sweep/__init__.py: its format) with `executor`, `jobs` runs at a time
-    (default: the number of cores), into `out` (default sweeps-results/NAME). Finished runs are skipped, interrupted
-    ones resumed from their checkpoints. dry_run: validate and list, run and write nothing.
+    (default: the executor's DEFAULT_JOBS, else the number of cores), into `out` (default sweeps-results/NAME).
+    Finished runs are skipped, interrupted ones resumed from their checkpoints. dry_run: validate and list, run and
+    write nothing.
 
     Returns dict(sweep, root, points: [(point, run_dir, state)], results: run_dir -> result, counts: completed /
     skipped / failed / interrupted / not started, csv, plots). Bad input (the file, a point, the executor or its
@@ -66,7 +67,7 @@ def run_sweep(path, executor: str = "local", jobs: int | None = None, out=None, 
     opts = {**sweep.executor_options.get(executor, {}), **(options or {})}
     if hasattr(ex, "check_options"):
         opts = ex.check_options(opts)
-    jobs = jobs or os.cpu_count() or 1
+    jobs = jobs or getattr(ex, "DEFAULT_JOBS", None) or os.cpu_count() or 1     # slurm: the cluster decides
     listing = [(p, p.run_dir(root), state(p.run_dir(root))) for p in points]
     counts = {"completed": 0, "skipped": 0, "failed": 0, "interrupted": 0, "not started": 0}
     if dry_run:
