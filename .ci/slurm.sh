@@ -7,8 +7,8 @@
 # Settings that make a short test possible, all documented in slurm.conf(5):
 #   OverTimeLimit=0                no grace after the time limit
 #   AuthInfo=cred_expire=10        a requeued job may start again after 11 s (default 121 s)
-#   SchedulerParameters=sched_interval=5,bf_interval=5
-#                                  pending jobs (a requeued one) are tried every 5 s (default 60 s / 30 s)
+#   SchedulerParameters=sched_interval=2,bf_interval=2
+#                                  pending jobs (a requeued one) are tried every 2 s (default 60 s / 30 s)
 #   KillWait=10                    SIGKILL 10 s after the SIGTERM at the time limit (default 30 s)
 # slurmctld checks time limits (and sends --signal warnings) every 30 s, a compile-time constant (PERIODIC_TIMEOUT).
 #
@@ -79,7 +79,7 @@ SelectType=select/cons_tres
 SelectTypeParameters=CR_Core_Memory
 DefMemPerCPU=1024
 SchedulerType=sched/backfill
-SchedulerParameters=sched_interval=5,bf_interval=5
+SchedulerParameters=sched_interval=2,bf_interval=2
 ReturnToService=2
 OverTimeLimit=0
 KillWait=10
