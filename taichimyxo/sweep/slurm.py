@@ -6,14 +6,16 @@ Each task runs taichimyxo.sweep.slurm_job.SlurmRun (run_point on the folder, `cp
 that reaches its time limit writes its checkpoint, is requeued and resumes from it (slurm_job says how), up to
 `max_requeues` times. Results collect as for local runs: from the run folders (result.json), so a sweep run again
 with any executor skips what is done. Progress polls squeue every `poll_s`: runs done, running, failed, requeued, and
-the time left. Logs: OUT/slurm/JOBID_TASK/ (submitit's files: the job script, JOBID_TASK_0_log.out with everything
-the run printed); each run folder's slurm.json names its job and log, and slurm-attempts.jsonl lists its attempts.
+the time left. What a run prints goes to its folder's run.log; the jobs' own logs (submitit's files: the job script,
+JOBID_TASK_0_log.out with the signals and requeues) to OUT/slurm/JOBID_TASK/; each run folder's slurm.json names its
+job and log, and slurm-attempts.jsonl lists its attempts.
 
 Running the same sweep again while its jobs are still queued or running watches those jobs instead of submitting
 them twice. Ctrl-C cancels the sweep's jobs: the running ones get SIGINT and stop as a Ctrl-C'd run does (files
 closed, checkpoint written), the pending ones are removed; the next run of the sweep resumes them.
 
-Options (the sweep file's [slurm] table, or the command line's --slurm-* options): see OPTIONS."""
+Options: the sweep file's [slurm] table, any of OPTIONS; the command line's --partition, --account, --time-min,
+--cpus-per-task and --mem-gb override it."""
 from __future__ import annotations
 
 import os
@@ -141,25 +143,20 @@ def restarts(job_id: str) -> int | None:
     return None
 
 
-def _still_queued(run_dir: str) -> submitit.SlurmJob | None:
-    """The job an earlier sweep submitted for this folder, when it is still queued or running."""
-    rec = read_json(Path(run_dir) / SLURM_RECORD)
-    if not rec or not rec.get("job_id") or not rec.get("folder"):
-        return None
-    st = queue_states([rec["job_id"]]).get(rec["job_id"])
-    if st is None or st[0] not in ACTIVE:
-        return None
-    return submitit.SlurmJob(folder=rec["folder"], job_id=rec["job_id"])
+def still_queued(run_dirs: list[str]) -> dict[str, submitit.SlurmJob]:
+    """The jobs an earlier sweep submitted for these folders (their slurm.json) that are still queued or running."""
+    recs = {d: read_json(Path(d) / SLURM_RECORD) or {} for d in run_dirs}
+    recs = {d: r for d, r in recs.items() if r.get("job_id") and r.get("folder")}
+    states = queue_states([r["job_id"] for r in recs.values()])
+    return {d: submitit.SlurmJob(folder=r["folder"], job_id=r["job_id"]) for d, r in recs.items()
+            if states.get(r["job_id"], ("",))[0] in ACTIVE}
 
 
 def submit(run_dirs: list[str], opts: dict, jobs: int, progress) -> dict[str, submitit.SlurmJob]:
     """Submit the folders (one job array) except those an earlier sweep's jobs still run; run_dir -> its job."""
-    watched = {}
-    for d in run_dirs:
-        job = _still_queued(d)
-        if job is not None:
-            watched[d] = job
-            progress.note(f"{Path(d).name}: already in Slurm job {job.job_id}; watching it")
+    watched = still_queued(run_dirs)
+    for d, job in watched.items():
+        progress.note(f"{Path(d).name}: already in Slurm job {job.job_id}; watching it")
     todo = [d for d in run_dirs if d not in watched]
     if not todo:
         return watched
@@ -168,9 +165,11 @@ def submit(run_dirs: list[str], opts: dict, jobs: int, progress) -> dict[str, su
     ex = make_executor(folder, opts, jobs)
     try:
         submitted = ex.map_array(SlurmRun(), todo, [opts["cpus_per_task"]] * len(todo))
-    except Exception as e:          # noqa: BLE001 - sbatch refused the job: its message, in one line
-        msg = " ".join(str(e).split())
-        raise SweepError(f"--executor slurm: sbatch refused the jobs: {msg[:500]}") from None
+    except Exception as e:          # noqa: BLE001 - sbatch refused the job: its last error line
+        lines = [ln.strip() for ln in str(e).splitlines() if ln.strip()]
+        msg = next((ln for ln in reversed(lines) if "error:" in ln), lines[-1] if lines else repr(e))
+        raise SweepError(f"--executor slurm: sbatch refused the jobs: {msg.split('error:', 1)[-1].strip()}") \
+            from None
     for d, job in zip(todo, submitted):
         write_json_atomic(Path(d) / SLURM_RECORD, {"job_id": job.job_id, "folder": str(folder / "%j"),
                                                    "log": str(job.paths.stdout), "submitted": time.time()})
@@ -267,7 +266,9 @@ def execute(run_dirs: list[str], jobs: int, options: dict, progress) -> dict[str
                 time.sleep(opts["poll_s"])
     except KeyboardInterrupt:
         cancel(running, progress)
-        results.update(wait_cancelled(running))
+        for d, res in wait_cancelled(running).items():
+            results[d] = res
+            progress.finished(d, res)
     return results
 
 

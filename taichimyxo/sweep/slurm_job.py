@@ -15,7 +15,8 @@ How a time limit becomes a resumed run:
 A SIGTERM without the warning (scancel, a time limit reached without it) stops the run the same way, checkpoint
 written, with no requeue: the next sweep of the same file resumes it.
 
-Each attempt is a line in the run folder's slurm-attempts.jsonl: when it started, the job id and Slurm's restart
+What the run prints goes to the run folder's run.log (as with the local executor); the job's own log (submitit's,
+srun's) to the sweep's slurm/ folder. Each attempt is a line in the run folder's slurm-attempts.jsonl: when it started, the job id and Slurm's restart
 count (SLURM_RESTART_COUNT), host and process id, and when it ended: its status, simulated seconds and sessions (a resumed run has more
 than one) and whether the time-limit signal stopped it."""
 from __future__ import annotations
@@ -24,13 +25,16 @@ import json
 import os
 import signal
 import socket
+import sys
 import threading
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 from submitit.helpers import Checkpointable
 
 from ..driver import Interrupt
+from .rundir import LOG_FILE
 from .runner import run_point
 
 ATTEMPTS_FILE = "slurm-attempts.jsonl"
@@ -83,6 +87,27 @@ class TimeLimitStop:
             self._previous(signal.SIGUSR2, None)
 
 
+@contextmanager
+def output_to(path):
+    """Everything the process writes to stdout and stderr (Taichi's C++ too) appended to `path` meanwhile: the run
+    folder's run.log, as the local executor writes it."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = os.dup(1), os.dup(2)
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
+    try:
+        os.dup2(fd, 1)
+        os.dup2(fd, 2)
+        yield
+    finally:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os.dup2(saved[0], 1)
+        os.dup2(saved[1], 2)
+        for f in (fd, *saved):
+            os.close(f)
+
+
 def record_attempt(run_dir, **fields) -> None:
     """Append one JSON line to the run folder's slurm-attempts.jsonl."""
     line = {"time": time.strftime("%Y-%m-%dT%H:%M:%S"), "job_id": job_id(),
@@ -121,7 +146,8 @@ class SlurmRun(Checkpointable):
     def __call__(self, run_dir: str, threads: int = 1) -> dict:
         os.environ["TAICHIMYXO_THREADS"] = str(threads)
         record_attempt(run_dir, event="start")
-        with TimeLimitStop() as stop:
+        print(f"taichimyxo: running {run_dir}; its output: {Path(run_dir) / LOG_FILE}", flush=True)
+        with TimeLimitStop() as stop, output_to(Path(run_dir) / LOG_FILE):
             res = run_point(run_dir, threads=threads)
         stopped = stop.signalled.is_set() and res.get("status") == "interrupted"
         record_attempt(run_dir, event="end", status=res.get("status"), simulated_seconds=res.get("simulated_seconds"),
