@@ -18,7 +18,7 @@ import sys
 import time
 from pathlib import Path
 
-from .rundir import LOG_FILE, read_result
+from .rundir import LOG_FILE, POINT_FILE, read_json, read_result
 from .spec import SweepError
 
 OPTIONS = {"threads": 1}
@@ -48,7 +48,7 @@ def _last_line(log: Path) -> str:
 def outcome(run_dir: str, rc: int) -> dict:
     """What a finished worker left: its result.json when it ended for good; otherwise interrupted (exit 130: the
     checkpoint is written) or failed with the last line it printed (a crash, a kill)."""
-    name = Path(run_dir).name
+    name = (read_json(Path(run_dir) / POINT_FILE) or {}).get("name", Path(run_dir).name)
     if rc == 0 or rc == 1:
         r = read_result(run_dir)
         if r:
