@@ -287,3 +287,37 @@ def test_a_failing_point_fails_alone_and_an_interrupted_one_resumes(tmp_path, ca
     assert rows["run.dt_ms=100_seed=1"]["status"] == "failed" and "segment lengths" in rows["run.dt_ms=100_seed=1"][
         "error"]
     assert os.path.getsize(root / "sweep.csv") > 0
+
+
+@pytest.mark.slow
+def test_ctrl_c_keeps_finished_runs_and_checkpoints_the_running_ones(tmp_path):
+    """Ctrl-C to the sweep while one run has finished and another is running: exit 130, the finished run's files and
+    result intact, the running one closed with a checkpoint (the next sweep resumes it), the table says which."""
+    import signal
+    import subprocess
+    import sys
+    import time
+    f = sweep_file(tmp_path, "run.hours = [0.001, 0.05]")
+    f.write_text(f.read_text().replace("hours = 0.001\n", ""))
+    root = tmp_path / "o"
+    proc = subprocess.Popen([sys.executable, "-m", "taichimyxo", "sweep", str(f), "--jobs", "2", "--out", str(root)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
+    short = lambda: next((root / "runs").glob("run.hours=0.001_*"), None)      # noqa: E731
+    long_ = lambda: next((root / "runs").glob("run.hours=0.05_*"), None)       # noqa: E731
+    t0 = time.time()
+    while time.time() - t0 < 300:
+        if short() and (short() / "result.json").is_file() and long_() and \
+                "simulated (" in (long_() / "run.log").read_text(errors="replace"):
+            break
+        assert proc.poll() is None, proc.communicate()
+        time.sleep(0.2)
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, (out, err)
+    assert "1 completed, 0 done before, 0 failed, 1 interrupted or not started" in out, out
+    assert json.loads((short() / "result.json").read_text())["status"] == "completed"
+    name = long_().name.rsplit("-", 1)[0]
+    assert (long_() / f"{name}.ckpt.npz").is_file() and not (long_() / "result.json").exists()
+    assert json.loads((long_() / f"{name}.json").read_text())["status"] == "interrupted"
+    rows = _csv(root)
+    assert rows[short().name.rsplit("-", 1)[0]]["status"] == "completed" and rows[name]["status"] == "interrupted"
