@@ -282,7 +282,7 @@ def cmd_videos(args) -> int:
     from .videos import regenerate
     jobs = args.jobs or (1 if args.executor == "local" else os.cpu_count() or 1)
     return regenerate(preview=args.preview, only=args.only, out_dir=args.out, arch=args.arch,
-                      executor=args.executor, jobs=jobs)
+                      executor=args.executor, jobs=jobs, options=executor_options(args))
 
 
 def cmd_sweep(args) -> int:

@@ -38,7 +38,9 @@ def _up_to_date(sc: Scene, out: Path) -> bool:
 
 
 def regenerate(preview: bool = False, only: str | None = None, out_dir: str = "videos", arch: str = "cpu",
-               executor: str = "local", jobs: int = 1) -> int:
+               executor: str = "local", jobs: int = 1, options: dict | None = None) -> int:
+    """Make the videos (module docstring); executor, jobs, options: in parallel through a sweep executor
+    (taichimyxo.sweep.driver) when jobs > 1 or executor is not local, with its options (e.g. Slurm's)."""
     names = VIDEO_SCENES
     if only:
         # any scene `list` shows (the supplementary videos S1-S17 and the figure panels such as S2FigA)
@@ -48,18 +50,20 @@ def regenerate(preview: bool = False, only: str | None = None, out_dir: str = "v
         if unknown or not names:
             raise SceneError(f"--only: unknown scene {', '.join(unknown) or repr(only)}; available: "
                              f"{', '.join(known)}")
+    ex = None
+    if executor != "local" or jobs > 1:
+        from .sweep.driver import executor_module
+        # a missing executor or a bad option is bad input, refused before anything is written
+        ex = executor_module(executor)
+        opts = ex.check_options(options or {}) if hasattr(ex, "check_options") else dict(options or {})
     from .scene_run import check_output_dir
     out = check_output_dir(out_dir)
     scenes = [(n, Scene.load(n, {}, preview=preview)) for n in names]      # validate all before running any
     todo = [(n, sc) for n, sc in scenes if not _up_to_date(sc, out)]
-    ex = None
-    if executor != "local" or jobs > 1:
-        from .sweep.driver import executor_module
-        ex = executor_module(executor)          # a missing executor is bad input, before anything runs
     print(f"videos: {len(scenes) - len(todo)} of {len(scenes)} up to date in {out}; {len(todo)} to make",
           flush=True)
     if ex is not None:
-        return in_parallel([sc for _, sc in todo], out, arch, ex, jobs)
+        return in_parallel([sc for _, sc in todo], out, arch, ex, jobs, opts)
     t0 = time.time()
     for i, (name, sc) in enumerate(todo, 1):
         cmd = [sys.executable, "-m", "taichimyxo", "scene", name, "--out", str(out), "--arch", arch]
@@ -80,13 +84,12 @@ def regenerate(preview: bool = False, only: str | None = None, out_dir: str = "v
     return 0
 
 
-def in_parallel(scenes: list, out: Path, arch: str, ex, jobs: int) -> int:
+def in_parallel(scenes: list, out: Path, arch: str, ex, jobs: int, opts: dict) -> int:
     """The videos through the executor module `ex` (taichimyxo.sweep.driver), `jobs` at a time; those that can reuse
     an earlier one's trajectory (the same physics and seed: S8 and S3) in a second wave. Exit status: 0, 1 when a
     video failed, 130 when interrupted."""
     from .sweep.progress import SweepProgress
     from .sweep.rundir import prepare_job
-    opts = ex.check_options({}) if hasattr(ex, "check_options") else {}
     first, second, seen = [], [], set()
     for sc in scenes:
         (second if sc.fingerprint() in seen else first).append(sc)
