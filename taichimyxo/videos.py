@@ -1,8 +1,10 @@
-"""Regenerate the supplementary videos: `python -m taichimyxo videos [--preview] [--only S3,S8]`.
+"""Regenerate the supplementary videos: `python -m taichimyxo videos [--preview] [--only S3,S8] [--jobs N]
+[--executor local|slurm]`.
 
 Runs S1-S17 in order (or the scenes --only names: any that `list` shows), each in its own process (one Simulation
 per process: Taichi compiles per instance), skips those whose outputs are up to date (same scene fingerprint,
-completed), resumes an interrupted one from its checkpoint, and shows overall progress. Ctrl-C stops after closing the current run's files; run again to continue.
+completed), resumes an interrupted one from its checkpoint, and shows overall progress. Ctrl-C stops after closing
+the current run's files; run again to continue.
 
 With --jobs N (N > 1) or --executor slurm the videos run in parallel through a sweep executor
 (taichimyxo.sweep.driver): each video gets a run folder OUT/.jobs/NAME/ (its resolved scene, its log, its result)

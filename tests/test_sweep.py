@@ -15,7 +15,6 @@ import json
 import os
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from taichimyxo.cli import main
