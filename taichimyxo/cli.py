@@ -313,8 +313,10 @@ def cmd_sweep(args) -> int:
     combos = len(pts) // max(1, len(sw.seeds))
     over = f"{combos} grid points of {', '.join(sw.swept_keys)} x " if sw.swept_keys else ""
     seeds = f"{len(sw.seeds)} seed{'s' if len(sw.seeds) > 1 else ''}"
-    hours = pts[0][0].scene.hours if pts else 0.0
-    print(f"{sw.name}: {len(pts)} runs ({over}{seeds}), {duration(hours * 3600)} simulated each, in {res['root']}")
+    hours = sorted({p.scene.hours for p, _, _ in pts})
+    each = f"{duration(hours[0] * 3600)} simulated each" if len(hours) == 1 else \
+        f"{duration(hours[0] * 3600)} to {duration(hours[-1] * 3600)} simulated"
+    print(f"{sw.name}: {len(pts)} runs ({over}{seeds}), {each}, in {res['root']}")
     if args.dry_run:
         w = max(len(p.name) for p, _, _ in pts)
         for p, d, st in pts:

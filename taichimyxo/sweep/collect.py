@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .rundir import read_result
+from .rundir import read_result, state
 
 OUTCOMES = {   # name -> label on the plots
     "n_aggregates": "rotating aggregates",
@@ -78,7 +78,8 @@ def rows(points, root) -> list[dict]:
         d = p.run_dir(root)
         r = read_result(d) or {}
         oc = r.get("outcomes") or {}
-        row = {"name": p.name, "run_dir": str(d.relative_to(root)), "status": r.get("status", "not run")}
+        row = {"name": p.name, "run_dir": str(d.relative_to(root)), "status": r.get("status") or
+               {"interrupted": "interrupted", "new": "not run"}.get(state(d), "not run")}
         row.update({k: v for k, v in p.overrides.items()})
         row.update(seed=p.seed, simulated_s=r.get("simulated_seconds"), wall_s=r.get("wall_seconds"),
                    steps=r.get("steps"), cells=r.get("cells"))

@@ -18,7 +18,7 @@ import sys
 import time
 from pathlib import Path
 
-from .rundir import LOG_FILE, read_result
+from .rundir import LOG_FILE, POINT_FILE, read_json, read_result
 from .spec import SweepError
 
 OPTIONS = {"threads": 1}
@@ -45,14 +45,14 @@ def _last_line(log: Path) -> str:
     return lines[-1] if lines else ""
 
 
-def outcome(run_dir: str, rc: int) -> dict:
-    """What a finished worker left: its result.json when it ended for good; otherwise interrupted (exit 130: the
-    checkpoint is written) or failed with the last line it printed (a crash, a kill)."""
-    name = Path(run_dir).name
-    if rc == 0 or rc == 1:
-        r = read_result(run_dir)
-        if r:
-            return {**r, "status": "completed" if r.get("status") == "completed" else r.get("status", "failed")}
+def outcome(run_dir: str, rc: int, launched_at: float) -> dict:
+    """What a finished worker left: the result.json it wrote when its run ended for good (whatever its exit status:
+    a Ctrl-C can reach it after the result is written); otherwise interrupted (exit 130: the checkpoint is written)
+    or failed with the last line it printed (a crash, a kill)."""
+    name = (read_json(Path(run_dir) / POINT_FILE) or {}).get("name", Path(run_dir).name)
+    r = read_result(run_dir)
+    if r and r.get("started_at", 0.0) >= launched_at - 1.0:          # this worker's, not an earlier session's
+        return r
     if rc in (EXIT_INTERRUPTED, -signal.SIGINT, -signal.SIGTERM):
         return {"name": name, "run_dir": run_dir, "status": "interrupted", "error": None}
     why = _last_line(Path(run_dir) / LOG_FILE) or "no output"
@@ -66,6 +66,7 @@ def execute(run_dirs: list[str], jobs: int, options: dict, progress) -> dict[str
     opts = check_options(options)
     queue = list(run_dirs)
     running: dict[str, tuple] = {}
+    launched: dict[str, float] = {}
     results: dict[str, dict] = {}
     try:                                    # SIGTERM (a batch system, `kill`) stops the sweep as Ctrl-C does
         old_term = signal.signal(signal.SIGTERM, _raise_interrupt)
@@ -79,7 +80,7 @@ def execute(run_dirs: list[str], jobs: int, options: dict, progress) -> dict[str
                 continue
             log.close()
             del running[d]
-            results[d] = outcome(d, rc)
+            results[d] = outcome(d, rc, launched[d])
             progress.finished(d, results[d])
 
     try:
@@ -89,6 +90,7 @@ def execute(run_dirs: list[str], jobs: int, options: dict, progress) -> dict[str
                 log = open(Path(d) / LOG_FILE, "ab")
                 cmd = [sys.executable, "-m", "taichimyxo.sweep", d, "--threads", str(opts["threads"])]
                 env = dict(os.environ, TAICHIMYXO_THREADS=str(opts["threads"]))
+                launched[d] = time.time()
                 proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                                         env=env, start_new_session=True)
                 running[d] = (proc, log)

@@ -4,7 +4,10 @@ compiles per Simulation, and one Simulation per process keeps runs apart).
 A run folder is self-contained, so a process on another machine or a Slurm node given only its path can run it:
 
   scene.toml          the resolved scene (every key; `python -m taichimyxo scene scene.toml` runs it too)
-  point.json          the sweep, the point's name, key, swept values and seed, and what to analyse
+  point.json          the sweep, the point's name, key, swept values and seed, and what to analyse (`analysis`:
+                      {every, plots}, or null for none; `videos` also sets `out`, the folder the files go to,
+                      relative to the run folder, `arch` and `reuse`, rendering from a finished trajectory of the
+                      same physics; taichimyxo.sweep.rundir.prepare_job)
   NAME.gsd            the trajectory (always), NAME.json the run summary, NAME.mp4/.png when the sweep asks
   NAME.analysis.json  the analysis of the trajectory (taichimyxo.analysis), with its plots when the sweep asks
   NAME.ckpt.npz       the checkpoint while the run is unfinished (every few minutes, on SIGINT/SIGTERM)
@@ -35,7 +38,9 @@ def run_point(run_dir: str, threads: int = 1) -> dict:
     run_dir = Path(run_dir)
     t0 = time.perf_counter()
     point = read_json(run_dir / POINT_FILE) or {}
-    base = {"name": point.get("name", run_dir.name), "key": point.get("key"), "run_dir": str(run_dir.resolve())}
+    # started_at / ended_at (Unix time, this process): when the run held its worker, for how runs overlapped
+    base = {"name": point.get("name", run_dir.name), "key": point.get("key"), "run_dir": str(run_dir.resolve()),
+            "started_at": time.time()}
     done = read_result(run_dir)
     if done and done.get("status") == "completed":
         return {**done, "status": "skipped"}
@@ -47,7 +52,7 @@ def run_point(run_dir: str, threads: int = 1) -> dict:
         msg = str(e).splitlines()[0] if str(e) else ""
         err = f"{type(e).__name__}: {msg}" if not isinstance(e, ValueError) or not msg else msg
         res = {**base, "status": "failed", "error": err, "traceback": traceback.format_exc(limit=8),
-               "process_seconds": time.perf_counter() - t0}
+               "process_seconds": time.perf_counter() - t0, "ended_at": time.time()}
         write_json_atomic(run_dir / RESULT, res)
         return res
 
@@ -83,7 +88,7 @@ def _run(run_dir: Path, point: dict, base: dict, threads: int, t0: float) -> dic
                            plots=bool(point["analysis"].get("plots", False)))
         res.update(analysis_seconds=time.perf_counter() - t_an, analysis=Path(analysis["json"]).name,
                    outcomes=outcomes(analysis))
-    res["process_seconds"] = time.perf_counter() - t0
+    res.update(process_seconds=time.perf_counter() - t0, ended_at=time.time())
     write_json_atomic(run_dir / RESULT, res)
     return res
 

@@ -177,6 +177,8 @@ def _flatten(table: dict, where: str, path: Path) -> dict:
             raise SweepError(f"{path}: [{where}] run.seed: give the seeds with `seeds = N` or `seeds = [...]`")
         if key in ("scene.name", "scene.title"):
             raise SweepError(f"{path}: [{where}] {key}: a sweep names its runs after their points")
+        if key == "output.movie":
+            raise SweepError(f"{path}: [{where}] output.movie: say it once for every run, in [outputs] movie")
     return out
 
 
