@@ -111,19 +111,22 @@ def make_executor(folder: Path, opts: dict, jobs: int):
     return ex
 
 
-def queue_states(job_ids) -> dict[str, tuple[str, str]]:
+def queue_states(job_ids) -> dict[str, tuple[str, str]] | None:
     """squeue's view of these jobs (array tasks one by one): job id -> (state, reason). Jobs it has forgotten (ended
-    longer ago than MinJobAge) are absent. Empty when squeue fails (the next look may work)."""
+    longer ago than MinJobAge) are absent. None when squeue fails (the controller busy or restarting: look again)."""
     arrays = sorted({j.split("_")[0] for j in job_ids})
     if not arrays:
         return {}
     try:
-        out = subprocess.run(["squeue", "-h", "-r", "--states=all", "-o", "%i|%T|%r", "-j", ",".join(arrays)],
-                             capture_output=True, text=True, timeout=60).stdout
+        p = subprocess.run(["squeue", "-h", "-r", "--states=all", "-o", "%i|%T|%r", "-j", ",".join(arrays)],
+                           capture_output=True, text=True, timeout=60)
     except (OSError, subprocess.SubprocessError):
-        return {}
+        return None
+    if p.returncode != 0:
+        # every job asked for is forgotten: squeue says so as an error; anything else is a failure to look
+        return {} if "Invalid job id" in p.stderr else None
     states = {}
-    for ln in out.splitlines():
+    for ln in p.stdout.splitlines():
         parts = ln.strip().split("|")
         if len(parts) == 3:
             states[parts[0]] = (parts[1], parts[2])
@@ -148,6 +151,8 @@ def still_queued(run_dirs: list[str]) -> dict[str, submitit.SlurmJob]:
     recs = {d: read_json(Path(d) / SLURM_RECORD) or {} for d in run_dirs}
     recs = {d: r for d, r in recs.items() if r.get("job_id") and r.get("folder")}
     states = queue_states([r["job_id"] for r in recs.values()])
+    if states is None:
+        raise SweepError("--executor slurm: squeue does not answer; is the Slurm controller up? (`squeue` says why)")
     return {d: submitit.SlurmJob(folder=r["folder"], job_id=r["job_id"]) for d, r in recs.items()
             if states.get(r["job_id"], ("",))[0] in ACTIVE}
 
@@ -235,6 +240,9 @@ def execute(run_dirs: list[str], jobs: int, options: dict, progress) -> dict[str
     try:
         while running:
             states = queue_states([j.job_id for j in running.values()])
+            if states is None:           # squeue failed this time: look again later
+                time.sleep(opts["poll_s"])
+                continue
             for d, job in list(running.items()):
                 st = states.get(job.job_id, ("", ""))[0]
                 if job.paths.result_pickle.exists():
@@ -260,6 +268,8 @@ def execute(run_dirs: list[str], jobs: int, options: dict, progress) -> dict[str
                 del running[d]
                 if d not in progress.running:
                     progress.started(d)
+                if res.get("status") == "interrupted" and res.get("error"):
+                    progress.note(f"{Path(d).name}: {res['error']}")
                 progress.finished(d, res)
             progress.tick()
             if running:
@@ -276,7 +286,7 @@ def cancel(running: dict, progress) -> None:
     """Ctrl-C: running jobs get SIGINT (the run stops with its checkpoint, its job ends), pending ones are removed."""
     progress.note(f"interrupted: cancelling {len(running)} Slurm jobs; running runs write their checkpoints")
     ids = [j.job_id for j in running.values()]
-    states = queue_states(ids)
+    states = queue_states(ids) or {}
     run_ids = [i for i in ids if states.get(i, ("",))[0] == "RUNNING"]
     other = [i for i in ids if i not in run_ids]
     if run_ids:
@@ -292,6 +302,9 @@ def wait_cancelled(running: dict, timeout_s: float = 120.0) -> dict[str, dict]:
     try:
         while running and time.monotonic() - t0 < timeout_s:
             states = queue_states([j.job_id for j in running.values()])
+            if states is None:
+                time.sleep(1.0)
+                continue
             for d, job in list(running.items()):
                 if job.paths.result_pickle.exists():
                     out[d] = job_result(d, job)
