@@ -5,7 +5,10 @@
 # or a config change. Exits non-zero with the failing daemon's own error when the cluster does not come up.
 #
 # Settings that make a short test possible, all documented in slurm.conf(5):
-#   OverTimeLimit=0                no grace after the time limit
+#   OverTimeLimit=1                the hard kill (SIGTERM) a minute after the time limit: a run stops and requeues at
+#                                  the --signal warning before the limit, and on a loaded machine finishing the chunk
+#                                  it is in (compiling kernels, on a cold cache) can take longer than the 30 s that
+#                                  would otherwise separate the warning from the kill
 #   AuthInfo=cred_expire=10        a requeued job may start again after 11 s (default 121 s)
 #   SchedulerParameters=sched_interval=2,bf_interval=2
 #                                  pending jobs (a requeued one) are tried every 2 s (default 60 s / 30 s)
@@ -81,7 +84,7 @@ DefMemPerCPU=1024
 SchedulerType=sched/backfill
 SchedulerParameters=sched_interval=2,bf_interval=2
 ReturnToService=2
-OverTimeLimit=0
+OverTimeLimit=1
 KillWait=10
 MinJobAge=600
 SlurmctldTimeout=30

@@ -1,6 +1,7 @@
 """The Slurm executor on a real Slurm cluster (issue 11 items 4, 5): .ci/slurm.sh starts one on localhost (munged,
 slurmctld, slurmd; CI runs it and sets TAICHIMYXO_SLURM_TESTS=1, which makes this test required). Elsewhere it is
-skipped, with the reason, when no cluster answers.
+skipped, with the reason, when no cluster answers or when the cluster's nodes are other machines (the test pauses a
+job's process, so the jobs must run here).
 
 A sweep of 2 points x 1 seed (36 simulated seconds in a 20 x 20 µm box, no movie) goes through
 `--executor slurm` with a 1-minute time limit. One run is made to reach its time limit: once it simulates, the test
@@ -19,6 +20,7 @@ import json
 import os
 import shutil
 import signal
+import socket
 import subprocess
 import threading
 import time
@@ -67,6 +69,11 @@ def cluster_problem() -> str | None:
     states = [s.rstrip("*~#!%$@^-") for s in p.stdout.split()]
     if not any(s in ("idle", "mix", "alloc", "comp") for s in states):
         return f"no Slurm node takes jobs (sinfo: {' '.join(p.stdout.split()) or 'no nodes'})"
+    nodes = set(subprocess.run(["sinfo", "-h", "-N", "-o", "%N"], capture_output=True, text=True,
+                               timeout=60).stdout.split())
+    if nodes != {socket.gethostname().split(".")[0]}:
+        return (f"the Slurm cluster's nodes ({' '.join(sorted(nodes))}) are not just this machine, and the test "
+                "pauses a job's process")
     return None
 
 
@@ -116,7 +123,7 @@ class Pauser(threading.Thread):
     def __init__(self, root, point):
         super().__init__(daemon=True)
         self.root, self.point = root, point
-        self.paused, self.missed, self.not_paused = None, None, None
+        self.paused = self.not_paused = None
         self.done = threading.Event()
 
     def run(self):
@@ -126,11 +133,14 @@ class Pauser(threading.Thread):
             for d in self.root.glob(f"runs/{self.point}-*"):
                 att = read_attempts(d)
                 if any(a["event"] == "end" for a in att):
-                    self.missed = f"{self.point} ended its first attempt before it could be paused: {att}"
+                    self.not_paused = f"{self.point} ended its first attempt before it was seen simulating"
                     return
                 start = next((a for a in att if a["event"] == "start"), None)
                 if start is None or not (d / SLURM_RECORD).is_file() or frames_in(d) < 2:
                     continue
+                if start["host"] != socket.gethostname():
+                    self.not_paused = f"{self.point} runs on {start['host']}, not here"
+                    return
                 t0 = slurm_start(json.loads((d / SLURM_RECORD).read_text())["job_id"])
                 if t0 is None:
                     continue
@@ -175,15 +185,14 @@ def test_sweep_on_slurm_requeues_a_run_at_its_time_limit_and_resumes_it(slurm_cl
             subprocess.run(["scancel", json.loads(rec.read_text())["job_id"]], capture_output=True)
     progress = log.getvalue()
     assert not gave_up, f"the sweep did not end within {GIVE_UP_S} s:\n{progress}"
-    assert pauser.missed is None, pauser.missed
-    assert pauser.paused is not None or pauser.not_paused, f"{PAUSED_POINT} was never seen simulating:\n{progress}"
+    paused = pauser.paused or pauser.not_paused       # for the messages: whether the run was paused, or why not
 
     # both runs completed and were collected the way local runs are
     assert res["counts"]["completed"] == 2 and res["counts"]["failed"] == 0, (res["counts"], progress)
     with open(res["csv"]) as f:
         rows = f.read().splitlines()
     assert len(rows) == 3, rows                        # header + one row per run
-    assert "requeued (time limit)" in progress, progress
+    assert "requeued (time limit)" in progress, (progress, paused)
 
     run_dir = next(root.glob(f"runs/{PAUSED_POINT}-*"))
     job_id = json.loads((run_dir / SLURM_RECORD).read_text())["job_id"]
@@ -194,10 +203,10 @@ def test_sweep_on_slurm_requeues_a_run_at_its_time_limit_and_resumes_it(slurm_cl
     att = read_attempts(run_dir)
     starts = [a for a in att if a["event"] == "start"]
     ends = [a for a in att if a["event"] == "end"]
-    assert len(starts) >= 2 and len(ends) == len(starts), (att, pauser.paused or pauser.not_paused)
+    assert len(starts) >= 2 and len(ends) == len(starts), (att, paused)
     assert starts[0]["restart_count"] == 0 and starts[1]["restart_count"] >= 1, att
     first = ends[0]
-    assert first["status"] == "interrupted" and first["stopped_by_time_limit"], att
+    assert first["status"] == "interrupted" and first["stopped_by_time_limit"], (att, paused)
     assert first["simulated_seconds"] > 0, att
     assert ends[-1]["status"] == "completed" and ends[-1]["sessions"] == len(starts), att
 

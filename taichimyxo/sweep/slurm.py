@@ -27,7 +27,7 @@ from pathlib import Path
 
 import submitit
 
-from .rundir import read_json, read_result, write_json_atomic
+from .rundir import POINT_FILE, RESULT, read_json, read_result, write_json_atomic
 from .slurm_job import SlurmRun, read_attempts
 from .spec import SweepError
 
@@ -179,7 +179,8 @@ def submit(run_dirs: list[str], opts: dict, jobs: int, progress) -> dict[str, su
         write_json_atomic(Path(d) / SLURM_RECORD, {"job_id": job.job_id, "folder": str(folder / "%j"),
                                                    "log": str(job.paths.stdout), "submitted": time.time()})
     first = submitted[0].job_id.split("_")[0]
-    progress.note(f"submitted {len(todo)} runs as Slurm job array {first} "
+    what = f"{len(todo)} runs as Slurm job array {first}" if len(todo) > 1 else f"1 run as Slurm job {first}"
+    progress.note(f"submitted {what} "
                   f"({opts['time_min']} min, {opts['cpus_per_task']} CPU, {opts['mem_gb']:g} GB each); "
                   f"logs in {folder}")
     return {**watched, **dict(zip(todo, submitted))}
@@ -209,8 +210,8 @@ def starts(run_dir: str) -> int:
 
 
 def ended_without_result(run_dir: str, job, state: str) -> dict:
-    """A job that left no result (killed, cancelled, lost): interrupted when its run has a checkpoint to resume
-    from, else failed with the log's last line."""
+    """A job that left no result (killed, cancelled, lost): interrupted when its run can go on (a checkpoint to resume
+    from, or a completed simulation whose analysis was cut short), else failed with the log's last line."""
     name = Path(run_dir).name
     r = read_result(run_dir)
     if r:
@@ -222,7 +223,9 @@ def ended_without_result(run_dir: str, job, state: str) -> dict:
     except OSError:
         pass
     why = f"Slurm job {job.job_id} ended {state} without a result" + (f": {last}" if last else "")
-    if any(Path(run_dir).glob("*.ckpt.npz")):
+    simulated = any((read_json(p) or {}).get("completed") for p in Path(run_dir).glob("*.json")
+                    if p.name not in (POINT_FILE, RESULT, SLURM_RECORD))
+    if simulated or any(Path(run_dir).glob("*.ckpt.npz")):
         return {"name": name, "run_dir": run_dir, "status": "interrupted", "error": why}
     return {"name": name, "run_dir": run_dir, "status": "failed", "error": f"{why} (log: {job.paths.stdout})"}
 

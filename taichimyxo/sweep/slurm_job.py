@@ -33,6 +33,7 @@ from pathlib import Path
 
 from submitit.helpers import Checkpointable
 
+from ..backend import reset
 from ..driver import Interrupt
 from .rundir import LOG_FILE
 from .runner import run_point
@@ -153,5 +154,8 @@ class SlurmRun(Checkpointable):
         record_attempt(run_dir, event="end", status=res.get("status"), simulated_seconds=res.get("simulated_seconds"),
                        sessions=res.get("sessions"), stopped_by_time_limit=stopped)
         if stopped:
+            # Taichi writes the kernels it compiled to its offline cache when it is reset: now, before the requeue
+            # has Slurm terminate this process, so that the next attempt loads them instead of compiling again
+            reset()
             stop.requeue()          # exits the job when it requeues; returns (or raises) when it may not
         return res
