@@ -1,7 +1,8 @@
 """The Slurm executor on a real Slurm cluster (issue 11 items 4, 5): .ci/slurm.sh starts one on localhost (munged,
 slurmctld, slurmd; CI runs it and sets TAICHIMYXO_SLURM_TESTS=1, which makes this test required). Elsewhere it is
 skipped, with the reason, when no cluster answers or when the cluster's nodes are other machines (the test pauses a
-job's process, so the jobs must run here).
+job's process, so the jobs must run here). Two quick tests at the end need no cluster: the time-limit warning stops
+a simulation with a checkpoint, and bad Slurm options are refused in one line.
 
 A sweep of 2 points x 1 seed (36 simulated seconds in a 20 x 20 µm box, no movie) goes through
 `--executor slurm` with a 1-minute time limit. One run is made to reach its time limit: once it simulates, the test
@@ -18,6 +19,7 @@ from __future__ import annotations
 import io
 import json
 import os
+import re
 import shutil
 import signal
 import socket
@@ -221,3 +223,38 @@ def test_sweep_on_slurm_requeues_a_run_at_its_time_limit_and_resumes_it(slurm_cl
     # the other run: completed (requeued or not: that depends on the machine's speed)
     other = next(d for d in root.glob("runs/*") if d != run_dir)
     assert json.loads((other / "result.json").read_text())["status"] == "completed"
+
+
+# ------------------------------------------------------------------------------------------------ without a cluster
+def test_time_limit_warning_stops_the_simulation_with_a_checkpoint(ti_cpu, tmp_path, small_scene):
+    """SIGUSR2 (Slurm's warning before the time limit) under TimeLimitStop: the run stops as on Ctrl-C, checkpoint
+    written, also when the warning comes before the simulation started (here: before run_scene is called)."""
+    pytest.importorskip("submitit")
+    from taichimyxo.scene_run import run_scene
+    from taichimyxo.sweep.slurm_job import TimeLimitStop
+    sc = small_scene(20, run={"hours": 0.01, "dt_ms": 2.0}, output={"frame_interval_min": 0.02})   # 18000 steps
+    before = signal.getsignal(signal.SIGUSR2)
+    with TimeLimitStop() as stop:
+        os.kill(os.getpid(), signal.SIGUSR2)
+        summary = run_scene(sc, out_dir=str(tmp_path), progress=False)
+    assert stop.signalled.is_set()
+    assert summary["status"] == "interrupted" and 0 < summary["steps"] < sc.steps, summary
+    assert (tmp_path / f"{sc.name}.ckpt.npz").is_file()
+    assert signal.getsignal(signal.SIGUSR2) == before                 # the handler that was there is back
+
+
+def test_bad_slurm_options_are_one_line(capsys, tmp_path):
+    pytest.importorskip("submitit")
+    from taichimyxo.cli import main
+    from taichimyxo.sweep.slurm import check_options
+    from taichimyxo.sweep.spec import SweepError
+    for bad, says in (({"mem_gb": -1}, "[slurm] mem_gb = -1: expected a number > 0"),
+                      ({"time_min": 1.5}, "[slurm] time_min = 1.5: expected an integer"),
+                      ({"partitions": "x"}, "[slurm] partitions: unknown option"),
+                      ({"time_min": 1, "signal_delay_s": 60}, "must be shorter than the time limit")):
+        with pytest.raises(SweepError, match=re.escape(says)):
+            check_options(bad)
+    f = tmp_path / "s.toml"
+    f.write_text('scene = "S1"\nhours = 0.001\n')
+    assert main(["sweep", str(f), "--mem-gb", "2", "--dry-run"]) == 2
+    assert capsys.readouterr().err.strip() == "taichimyxo: error: --mem-gb: only with --executor slurm"
