@@ -22,7 +22,7 @@ _os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "false")   # keep stdout fo
 _LAZY = {
     "load_scene": "api", "Simulation": "api", "run": "api", "render_frame": "api", "render_movie": "api",
     "run_scene": "api", "analyze": "api", "claims": "api", "Periodic": "triggers", "WallClock": "triggers", "Frame": "frame", "Scene": "scene",
-    "SceneError": "scene", "Run": "driver", "drive": "driver",
+    "SceneError": "scene", "Run": "driver", "drive": "driver", "load_sweep": "sweep", "run_sweep": "sweep",
 }
 _SUBMODULES = ("writers", "triggers", "driver", "api", "render", "trajectory")
 

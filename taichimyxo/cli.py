@@ -1,7 +1,8 @@
-"""Command line: python -m taichimyxo {list, keys, scene, render, analyze, claims, videos}.
+"""Command line: python -m taichimyxo {list, keys, scene, render, analyze, claims, videos, sweep}.
 
 Bad input is one line on stderr naming the problem and a non-zero exit (2), before any simulation starts.
-Exit status: 0 done, 2 bad input, 3 a run stopped because its state broke a numerical invariant, 130 interrupted."""
+Exit status: 0 done, 2 bad input, 3 a run stopped because its state broke a numerical invariant, 130 interrupted;
+`sweep` and parallel `videos`: 1 when a run failed (each listed with its error; the others ran)."""
 from __future__ import annotations
 
 import argparse
@@ -11,6 +12,7 @@ import sys
 from .scene import SCHEMA, Scene, SceneError, available_scenes, parse_set, to_toml, toml_value
 from .trajectory import TrajectoryError
 
+EXIT_RUN_FAILED = 1
 EXIT_BAD_INPUT = 2
 EXIT_INVARIANT = 3
 EXIT_INTERRUPTED = 130
@@ -117,7 +119,48 @@ def _build_parser() -> argparse.ArgumentParser:
     v.add_argument("--only", help="comma-separated scene names as `list` shows them, e.g. S3,S8,S2FigA")
     v.add_argument("--out", default="videos")
     v.add_argument("--arch", default="cpu", choices=ARCHES)
+    _executor_arguments(v, "videos at a time (default 1: one after another, as before)")
+
+    w = sub.add_parser("sweep", help="a grid of scene keys x seeds from a sweep file, in parallel here or on a "
+                                     "Slurm cluster; one table of outcomes")
+    w.add_argument("file", help="sweep file (TOML), e.g. sweeps/example.toml; its format: README, \"Sweeps\"")
+    w.add_argument("--out", help="results folder (default sweeps-results/NAME, NAME the sweep's)")
+    w.add_argument("--dry-run", action="store_true", help="validate, list the points and their folders; run nothing")
+    _executor_arguments(w, "runs at a time (default: the number of cores), each on one thread")
     return p
+
+
+EXECUTOR_NAMES = ("local", "slurm")           # taichimyxo.sweep.driver.EXECUTORS (not imported: keep the CLI light)
+
+
+# --executor slurm's options on the command line: (flag, [slurm] key, type, metavar, help);
+# taichimyxo.sweep.slurm.OPTIONS has them all (the sweep file's [slurm] table takes any of those)
+SLURM_FLAGS = (("--partition", "partition", str, "NAME", "partition (default: the cluster's default)"),
+               ("--account", "account", str, "NAME", "account to charge"),
+               ("--time-min", "time_min", _positive_int, "MIN", "time limit per run, minutes (default 60); a run "
+                "that needs longer is requeued and resumes from its checkpoint"),
+               ("--cpus-per-task", "cpus_per_task", _positive_int, "N", "CPUs (Taichi threads) per run (default 1)"),
+               ("--mem-gb", "mem_gb", float, "GB", "memory per run, GB (default 4)"))
+
+
+def _executor_arguments(p, jobs_help: str) -> None:
+    p.add_argument("--executor", default="local", choices=EXECUTOR_NAMES,
+                   help="local: processes on this machine (default); slurm: jobs on a Slurm cluster")
+    p.add_argument("--jobs", type=_positive_int, help=jobs_help + "; with slurm: jobs running at once (default: "
+                                                              "as many as the cluster starts)")
+    g = p.add_argument_group("--executor slurm", "(override the sweep file's [slurm] table)")
+    for flag, key, kind, metavar, text in SLURM_FLAGS:
+        g.add_argument(flag, dest=f"slurm_{key}", type=kind, metavar=metavar, help=text)
+
+
+def executor_options(args) -> dict:
+    """The executor's options given on the command line (they update the sweep file's [local] / [slurm] table)."""
+    given = {key: getattr(args, f"slurm_{key}") for _, key, _, _, _ in SLURM_FLAGS
+             if getattr(args, f"slurm_{key}", None) is not None}
+    if given and args.executor != "slurm":
+        flags = [f for f, key, _, _, _ in SLURM_FLAGS if key in given]
+        raise SceneError(f"{', '.join(flags)}: only with --executor slurm")
+    return given
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -256,7 +299,41 @@ def cmd_claims(args) -> int:
 
 def cmd_videos(args) -> int:
     from .videos import regenerate
-    return regenerate(preview=args.preview, only=args.only, out_dir=args.out, arch=args.arch)
+    jobs = args.jobs or (1 if args.executor == "local" else 0)     # 0: the executor's default
+    return regenerate(preview=args.preview, only=args.only, out_dir=args.out, arch=args.arch,
+                      executor=args.executor, jobs=jobs, options=executor_options(args))
+
+
+def cmd_sweep(args) -> int:
+    from .progress import duration
+    from .sweep import run_sweep
+    res = run_sweep(args.file, executor=args.executor, jobs=args.jobs, out=args.out, dry_run=args.dry_run,
+                    options=executor_options(args))
+    sw, pts = res["sweep"], res["points"]
+    combos = len(pts) // max(1, len(sw.seeds))
+    over = f"{combos} grid points of {', '.join(sw.swept_keys)} x " if sw.swept_keys else ""
+    seeds = f"{len(sw.seeds)} seed{'s' if len(sw.seeds) > 1 else ''}"
+    hours = sorted({p.scene.hours for p, _, _ in pts})
+    each = f"{duration(hours[0] * 3600)} simulated each" if len(hours) == 1 else \
+        f"{duration(hours[0] * 3600)} to {duration(hours[-1] * 3600)} simulated"
+    print(f"{sw.name}: {len(pts)} runs ({over}{seeds}), {each}, in {res['root']}")
+    if args.dry_run:
+        w = max(len(p.name) for p, _, _ in pts)
+        for p, d, st in pts:
+            print(f"  {st:<11} {p.name:<{w}}  {d}")
+        return 0
+    c = res["counts"]
+    print(f"{sw.name}: {c['completed']} completed, {c['skipped']} done before, {c['failed']} failed"
+          + (f", {c['interrupted'] + c['not started']} interrupted or not started" if c["interrupted"] +
+             c["not started"] else ""))
+    for d, r in res["results"].items():
+        if r.get("status") == "failed":
+            print(f"  failed {r.get('name')}: {r.get('error')} (log: {os.path.join(d, 'run.log')})")
+    print(f"table {res['csv']}" + "".join(f"\nplot {p}" for p in res["plots"]))
+    if c["interrupted"] or c["not started"]:
+        print(f"taichimyxo: {sw.name} interrupted; run the same command again to continue", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    return EXIT_RUN_FAILED if c["failed"] else 0
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -276,6 +353,8 @@ def main(argv: list[str] | None = None) -> int:
             return cmd_claims(args)
         if args.cmd == "videos":
             return cmd_videos(args)
+        if args.cmd == "sweep":
+            return cmd_sweep(args)
     except (SceneError, TrajectoryError) as e:
         return _fail(str(e))
     except KeyboardInterrupt:

@@ -1,11 +1,19 @@
-"""Regenerate the supplementary videos: `python -m taichimyxo videos [--preview] [--only S3,S8]`.
+"""Regenerate the supplementary videos: `python -m taichimyxo videos [--preview] [--only S3,S8] [--jobs N]
+[--executor local|slurm]`.
 
 Runs S1-S17 in order (or the scenes --only names: any that `list` shows), each in its own process (one Simulation
 per process: Taichi compiles per instance), skips those whose outputs are up to date (same scene fingerprint,
-completed), resumes an interrupted one from its checkpoint, and shows overall progress. Ctrl-C stops after closing the current run's files; run again to continue."""
+completed), resumes an interrupted one from its checkpoint, and shows overall progress. Ctrl-C stops after closing
+the current run's files; run again to continue.
+
+With --jobs N (N > 1) or --executor slurm the videos run in parallel through a sweep executor
+(taichimyxo.sweep.driver): each video gets a run folder OUT/.jobs/NAME/ (its resolved scene, its log, its result)
+and writes its files into OUT as before; a video that can be rendered from another's trajectory (S8 from S3) waits
+for that one. A failed video is reported and the others go on."""
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 import time
@@ -32,7 +40,10 @@ def _up_to_date(sc: Scene, out: Path) -> bool:
     return d.get("simulated_seconds", 0.0) + sc.dt >= sc.hours * 3600
 
 
-def regenerate(preview: bool = False, only: str | None = None, out_dir: str = "videos", arch: str = "cpu") -> int:
+def regenerate(preview: bool = False, only: str | None = None, out_dir: str = "videos", arch: str = "cpu",
+               executor: str = "local", jobs: int = 1, options: dict | None = None) -> int:
+    """Make the videos (module docstring); executor, jobs, options: in parallel through a sweep executor
+    (taichimyxo.sweep.driver) when jobs > 1 or executor is not local, with its options (e.g. Slurm's)."""
     names = VIDEO_SCENES
     if only:
         # any scene `list` shows (the supplementary videos S1-S17 and the figure panels such as S2FigA)
@@ -42,12 +53,21 @@ def regenerate(preview: bool = False, only: str | None = None, out_dir: str = "v
         if unknown or not names:
             raise SceneError(f"--only: unknown scene {', '.join(unknown) or repr(only)}; available: "
                              f"{', '.join(known)}")
+    ex = None
+    if executor != "local" or jobs > 1:
+        from .sweep.driver import executor_module
+        # a missing executor or a bad option is bad input, refused before anything is written
+        ex = executor_module(executor)
+        opts = ex.check_options(options or {}) if hasattr(ex, "check_options") else dict(options or {})
+        jobs = jobs or getattr(ex, "DEFAULT_JOBS", None) or os.cpu_count() or 1    # 0: the executor's default
     from .scene_run import check_output_dir
     out = check_output_dir(out_dir)
     scenes = [(n, Scene.load(n, {}, preview=preview)) for n in names]      # validate all before running any
     todo = [(n, sc) for n, sc in scenes if not _up_to_date(sc, out)]
     print(f"videos: {len(scenes) - len(todo)} of {len(scenes)} up to date in {out}; {len(todo)} to make",
           flush=True)
+    if ex is not None:
+        return in_parallel([sc for _, sc in todo], out, arch, ex, jobs, opts)
     t0 = time.time()
     for i, (name, sc) in enumerate(todo, 1):
         cmd = [sys.executable, "-m", "taichimyxo", "scene", name, "--out", str(out), "--arch", arch]
@@ -66,3 +86,37 @@ def regenerate(preview: bool = False, only: str | None = None, out_dir: str = "v
             return rc
     print(f"videos: done in {time.time() - t0:.0f} s", flush=True)
     return 0
+
+
+def in_parallel(scenes: list, out: Path, arch: str, ex, jobs: int, opts: dict) -> int:
+    """The videos through the executor module `ex` (taichimyxo.sweep.driver), `jobs` at a time; those that can reuse
+    an earlier one's trajectory (the same physics and seed: S8 and S3) in a second wave. Exit status: 0, 1 when a
+    video failed, 130 when interrupted."""
+    from .sweep.progress import SweepProgress
+    from .sweep.rundir import prepare_job
+    first, second, seen = [], [], set()
+    for sc in scenes:
+        (second if sc.fingerprint() in seen else first).append(sc)
+        seen.add(sc.fingerprint())
+    progress = SweepProgress("videos", total=len(scenes), skipped=0, jobs=jobs)
+    results: dict = {}
+    try:
+        for wave in (first, second):
+            dirs = [str(prepare_job(sc, out / ".jobs" / sc.name, {"name": sc.name, "out": "../..", "arch": arch,
+                                                                  "reuse": True, "analysis": None}, fresh=True))
+                    for sc in wave]
+            if dirs:
+                results.update(ex.execute(dirs, jobs, opts, progress))
+            if any(r.get("status") in ("interrupted", "not started") for r in results.values()):
+                break
+    finally:
+        progress.close()
+    failed = [r for r in results.values() if r.get("status") == "failed"]
+    for r in failed:
+        print(f"videos: {r['name']} failed: {r.get('error')} (log: {Path(r['run_dir']) / 'run.log'})",
+              file=sys.stderr)
+    if any(r.get("status") in ("interrupted", "not started") for r in results.values()) or \
+            len(results) < len(scenes):
+        print("videos: interrupted; run the same command again to continue", file=sys.stderr)
+        return 130
+    return 1 if failed else 0

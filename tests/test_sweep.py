@@ -1,0 +1,322 @@
+"""Issue 11: ensembles and parameter sweeps from one file (taichimyxo.sweep), the local executor and `videos --jobs`.
+
+- A sweep file expands into grid points x seeds with readable names, short keys and self-contained run folders;
+  scale keeps the density; sweeps/stiffness.toml is exactly the S2 Fig / S3 Fig scenes at half scale.
+- Bad files (unknown key, empty list, a value out of range at one point, a missing executor) are refused in one line
+  naming the key and the point, exit 2, before anything is written.
+- Outcomes come from the analysis's last quarter; the table and a plot per swept key from the run folders.
+- Real runs (slow): 2 points x 1 seed with --jobs 2 give run folders, the CSV and the plot; a second sweep of the
+  same file runs nothing; a point that breaks an invariant fails alone, and an interrupted point resumes.
+All real runs share one small configuration (S1 on 20 x 20 µm, 3.6 simulated s), so its kernels compile once."""
+from __future__ import annotations
+
+import csv
+import json
+import os
+from pathlib import Path
+
+import pytest
+
+from taichimyxo.cli import main
+from taichimyxo.scene import Scene
+
+REPO = Path(__file__).resolve().parent.parent
+
+# the one configuration the real runs use: S1 (20 cells at the paper's density) on 20 x 20 µm, frames every 0.6 s
+SMALL = """
+scene = "S1"
+box_um = [20, 20]
+hours = 0.001
+{extra}
+[set]
+output.frame_interval_min = 0.01
+[grid]
+{grid}
+"""
+
+
+def sweep_file(tmp_path, grid: str, extra: str = "", name: str = "s.toml") -> Path:
+    f = tmp_path / name
+    f.write_text(SMALL.format(grid=grid, extra=extra))
+    return f
+
+
+def error_line(capsys, rc) -> str:
+    out = capsys.readouterr()
+    assert rc == 2, (rc, out.err)
+    lines = [ln for ln in out.err.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("taichimyxo: error: "), out.err
+    return lines[0]
+
+
+# ------------------------------------------------------------------------------------------------ the file
+def test_grid_times_seeds_gives_named_keyed_points(tmp_path):
+    from taichimyxo.sweep import load_sweep
+    base = tmp_path / "base.toml"
+    base.write_text("[population]\ncells = 40\n[domain]\nwidth_um = 40.0\nheight_um = 20.0\n")
+    f = tmp_path / "grid.toml"
+    f.write_text('scene = "base.toml"\nseeds = [3, 5]\nhours = 0.5\nscale = 0.5\n'
+                 '[grid]\ncell.k_a_N_m = [1e-17, 1e-15]\n"guiding.kind" = ["none", "active"]\n'
+                 '[set]\noutput.frame_interval_min = 2\n[outputs]\nmovie = true\n')
+    sw = load_sweep(f)
+    pts = sw.points()
+    assert len(pts) == 2 * 2 * 2 and sw.swept_keys == ["cell.k_a_N_m", "guiding.kind"]
+    p = pts[1]
+    assert p.name == "cell.k_a_N_m=1e-17_guiding.kind=none_seed=5"
+    assert p.overrides == {"cell.k_a_N_m": 1e-17, "guiding.kind": "none"} and p.seed == 5
+    sc = p.scene
+    assert (sc.box, sc.n_cells, sc.hours, sc.seed, sc.movie) == ((20.0, 10.0), 10, 0.5, 5, True)  # cells with area
+    assert sc.raw["output"]["frame_interval_min"] == 2 and sc.name == p.name
+    assert len({q.key for q in pts}) == len(pts) and len(p.key) == 10
+    assert p.run_dir("out") == Path("out") / "runs" / f"{p.name}-{p.key}"
+    assert load_sweep(f).points()[1].key == p.key                          # the same file, the same folders
+    # the folder's scene.toml is the point's scene: loading it back gives the same key
+    from taichimyxo.sweep.rundir import prepare
+    from taichimyxo.sweep.spec import scene_key
+    d = prepare(p, tmp_path / "out", sw)
+    assert scene_key(Scene.load(str(d / "scene.toml"))) == p.key
+    assert json.loads((d / "point.json").read_text())["overrides"] == p.overrides
+
+
+def test_stiffness_sweep_is_the_s2_and_s3_fig_series_at_half_scale():
+    from taichimyxo.sweep import load_sweep
+    pts = load_sweep(REPO / "sweeps" / "stiffness.toml").points()
+    figs = {"none": "S2Fig", "active": "S3Fig"}
+    letter = {1e-18: "A", 1e-17: "B", 1e-16: "C", 1e-15: "D"}
+    assert len(pts) == 4 * 2 * 3 and sorted({p.seed for p in pts}) == [1, 2, 3]
+    for p in pts:
+        name = figs[p.overrides["guiding.kind"]] + letter[p.overrides["cell.k_a_N_m"]]
+        ref = Scene.load(name, {"domain": {"width_um": 100.0, "height_um": 100.0}, "run": {"seed": p.seed},
+                                "output": {"movie": False}})
+        assert ref.hours == 6.0
+        strip = lambda s: {k: v for k, v in s.raw.items() if k != "scene"}      # noqa: E731
+        assert strip(p.scene) == strip(ref), (p.name, name)
+        assert p.scene.n_cells == 500                                          # the paper's density on 100 x 100
+
+
+@pytest.mark.parametrize("grid,extra,says", [
+    ("cell.k_a_nm = [1e-17]", "", "[grid] cell.k_a_nm: unknown key"),
+    ("cell.k_a_N_m = []", "", "[grid] cell.k_a_N_m = []: an empty list gives no points"),
+    ("cell.k_a_N_m = [1e-17, -1e-16]", "", "point cell.k_a_N_m=-1e-16_seed=1: cell.k_a_N_m = -1e-16: must be "
+                                           "positive"),
+    ("run.dt_ms = [1, 100]", "", "point run.dt_ms=100_seed=1: run.dt_ms = 100 exceeds the stability limit"),
+    ("cell.k_a_N_m = 1e-17", "", "[grid] cell.k_a_N_m = 1e-17: expected a list of values"),
+    ("run.seed = [1, 2]", "", "[grid] run.seed: give the seeds with `seeds = N`"),
+    ("guiding.kind = [\"none\"]", "seeds = 0", "seeds = 0: give a count of at least 1"),
+    ("guiding.kind = [\"none\"]", "colour = 1", "unknown key 'colour'"),
+])
+def test_bad_sweep_files_are_refused_in_one_line_before_anything_runs(tmp_path, capsys, grid, extra, says):
+    f = sweep_file(tmp_path, grid, extra)
+    out = tmp_path / "out"
+    line = error_line(capsys, main(["sweep", str(f), "--out", str(out)]))
+    assert says in line and str(f) in line, line
+    assert not out.exists()
+
+
+def test_a_missing_executor_is_one_line(tmp_path, capsys, monkeypatch):
+    from taichimyxo.sweep import driver
+    monkeypatch.setitem(driver.EXECUTORS, "slurm", "taichimyxo.sweep.no_such_executor")
+    f = sweep_file(tmp_path, "guiding.kind = [\"none\"]")
+    line = error_line(capsys, main(["sweep", str(f), "--executor", "slurm", "--out", str(tmp_path / "o")]))
+    assert "--executor slurm: taichimyxo.sweep.no_such_executor is not part of this installation" in line
+    assert not (tmp_path / "o").exists()
+
+
+def test_dry_run_lists_points_and_folders_and_writes_nothing(tmp_path, capsys):
+    f = sweep_file(tmp_path, "cell.k_a_N_m = [1e-17, 1e-16]", "seeds = 2")
+    assert main(["sweep", str(f), "--dry-run", "--out", str(tmp_path / "o")]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("s: 4 runs (2 grid points of cell.k_a_N_m x 2 seeds), 3.6 s simulated each")
+    assert len(out) == 5 and all(ln.split()[0] == "new" for ln in out[1:])
+    assert "cell.k_a_N_m=1e-16_seed=2" in out[4] and str(tmp_path / "o" / "runs") in out[4]
+    assert not (tmp_path / "o").exists()
+
+
+# ------------------------------------------------------------------------------------------------ collection
+def _analysis(n_frames=8, v_b=4.0):
+    """An analysis summary as taichimyxo.analysis writes it: frames every minute, aggregates in the last 4."""
+    t = list(map(float, range(n_frames)))
+    ts = dict(time_min=t, n_aggregates=[0, 0, 0, 0, 1, 1, 2, 2], fraction_in_aggregates=[0, 0, 0, 0, .1, .1, .3, .5],
+              speed_p95_um_per_min=[None, 4, 4, 4, 8, 8, 8, 12], free_cell_speed_um_per_min=[None] + [4.0] * 7)
+    tracks = [{"series": dict(time_min=[4, 5, 6, 7], n_cells=[10, 12, 14, 20], radius_um=[2, 2, 3, 5],
+                              edge_speed_um_per_min=[8, 8, 8, 16])},
+              {"series": dict(time_min=[6, 7], n_cells=[6, 10], radius_um=[1, 3], edge_speed_um_per_min=[8, 8])}]
+    return {"timeseries": ts, "tracks": tracks, "meta": {"v_b_um_per_min": v_b}}
+
+
+def test_outcomes_are_means_over_the_last_quarter_of_frames():
+    from taichimyxo.sweep import outcomes
+    oc = outcomes(_analysis())
+    # last quarter of 8 frames: t = 6, 7
+    assert oc["from_min"] == 6.0 and oc["frames"] == 2
+    assert oc["n_aggregates"] == 2 and oc["fraction_in_aggregates"] == pytest.approx(0.4)
+    assert oc["aggregate_cells"] == pytest.approx((14 + 20 + 6 + 10) / 4)
+    assert oc["aggregate_radius_um"] == pytest.approx((3 + 5 + 1 + 3) / 4)
+    assert oc["edge_speed_vb"] == pytest.approx((8 + 16 + 8 + 8) / 4 / 4)
+    assert oc["speed_p95_vb"] == pytest.approx(10 / 4) and oc["free_cell_speed_vb"] == pytest.approx(1.0)
+    empty = _analysis()
+    empty["tracks"] = []
+    assert outcomes(empty)["aggregate_cells"] is None and outcomes(empty)["edge_speed_vb"] is None
+
+
+def test_collect_writes_a_row_per_run_and_a_plot_per_swept_key(tmp_path):
+    from taichimyxo.sweep import collect, load_sweep
+    from taichimyxo.sweep.rundir import prepare, write_json_atomic
+    f = sweep_file(tmp_path, "cell.k_a_N_m = [1e-18, 1e-17, 1e-15]\nguiding.kind = [\"none\", \"active\"]",
+                   "seeds = 2")
+    sw = load_sweep(f)
+    pts = sw.points()
+    root = tmp_path / "o"
+    for i, p in enumerate(pts[:-1]):             # the last point has not run
+        d = prepare(p, root, sw)
+        size = 10.0 * (p.overrides["guiding.kind"] == "active") * (1 + p.seed)
+        write_json_atomic(d / "result.json", {"status": "completed" if i else "failed", "simulated_seconds": 3.6,
+                                              "wall_seconds": 1.5, "error": None if i else "stopped at step 9: x",
+                                              "outcomes": {"aggregate_cells": size, "n_aggregates": 1.0}})
+    res = collect(sw, root)
+    with open(res["csv"]) as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 12 and [r["status"] for r in rows].count("completed") == 10
+    assert rows[0]["status"] == "failed" and rows[0]["error"] == "stopped at step 9: x"
+    assert rows[-1]["status"] == "not run" and rows[-1]["aggregate_cells"] == ""
+    assert set(rows[0]) >= {"cell.k_a_N_m", "guiding.kind", "seed", "simulated_s", "wall_s", "n_aggregates",
+                            "aggregate_cells", "aggregate_radius_um", "fraction_in_aggregates", "edge_speed_vb",
+                            "speed_p95_vb"}
+    assert rows[3]["guiding.kind"] == "active" and float(rows[3]["aggregate_cells"]) == 30.0      # seed 2
+    assert [Path(p).name for p in res["plots"]] == ["sweep.cell.k_a_N_m.png", "sweep.guiding.kind.png"]
+    assert all(Path(p).stat().st_size > 10_000 for p in res["plots"])
+
+
+def test_progress_counts_runs_and_estimates_the_time_left():
+    import io
+    from taichimyxo.sweep.progress import SweepProgress
+    s = io.StringIO()
+    pr = SweepProgress("sw", total=5, skipped=1, jobs=2, stream=s)
+    assert "time left: after the first run" in pr.line()
+    pr.started("a")
+    pr.started("b")
+    pr.running["a"] -= 100.0                       # a started 100 s ago
+    pr.finished("a", {"status": "completed", "name": "a"})
+    pr.finished("b", {"status": "failed", "name": "b", "error": "boom"})
+    assert pr.line().startswith("sw: 2 of 5 done (1 before), 0 running, 1 failed, 2 waiting")
+    assert pr.eta_seconds() == pytest.approx(100.0, rel=0.05)       # 2 waiting x 100 s on 2 jobs
+    assert "sw: failed b: boom" in s.getvalue()
+
+
+# ------------------------------------------------------------------------------------------------ videos --jobs
+def test_videos_in_parallel_go_through_the_executor_and_s8_waits_for_s3s_trajectory(tmp_path, monkeypatch):
+    from taichimyxo import videos
+    from taichimyxo.sweep import driver
+    waves = []
+
+    class Fake:
+        @staticmethod
+        def execute(run_dirs, jobs, options, progress):
+            waves.append(([Path(d).name for d in run_dirs], jobs))
+            return {d: {"status": "completed", "name": Path(d).name, "run_dir": d} for d in run_dirs}
+
+    monkeypatch.setattr(driver, "executor_module", lambda name: Fake)
+    # S8 is S3's run coloured by strain: the second of the two (in the order given) renders the first's trajectory
+    assert videos.regenerate(preview=True, only="S3,S8,S1", out_dir=str(tmp_path), jobs=2) == 0
+    assert waves == [(["S3-preview", "S1-preview"], 2), (["S8-preview"], 2)]
+    point = json.loads((tmp_path / ".jobs" / "S8-preview" / "point.json").read_text())
+    assert point == {"name": "S8-preview", "out": "../..", "arch": "cpu", "reuse": True, "analysis": None}
+    assert Scene.load(str(tmp_path / ".jobs" / "S8-preview" / "scene.toml")).color == "strain"
+
+
+# ------------------------------------------------------------------------------------------------ real runs
+def _csv(root):
+    with open(root / "sweep.csv") as fh:
+        return {r["name"]: r for r in csv.DictReader(fh)}
+
+
+@pytest.mark.slow
+def test_local_sweep_runs_points_in_parallel_and_a_rerun_skips_them(tmp_path, capsys):
+    f = sweep_file(tmp_path, "run.dt_ms = [1, 2]")
+    root = tmp_path / "o"
+    assert main(["sweep", str(f), "--jobs", "2", "--out", str(root)]) == 0
+    out = capsys.readouterr()
+    assert "s: 2 completed, 0 done before, 0 failed" in out.out and "s: 2 of 2 done" in out.err
+    runs = sorted((root / "runs").iterdir())
+    assert [d.name.rsplit("-", 1)[0] for d in runs] == ["run.dt_ms=1_seed=1", "run.dt_ms=2_seed=1"]
+    for d in runs:
+        name = d.name.rsplit("-", 1)[0]
+        for f_ in ("scene.toml", "point.json", f"{name}.gsd", f"{name}.json", f"{name}.analysis.json", "run.log"):
+            assert (d / f_).is_file(), (d, f_)
+        assert not (d / f"{name}.mp4").exists()
+        r = json.loads((d / "result.json").read_text())
+        assert r["status"] == "completed" and r["simulated_seconds"] == pytest.approx(3.6)
+        assert r["cells"] == 20 and r["outcomes"]["free_cell_speed_vb"] > 0.5
+    results = [json.loads((d / "result.json").read_text()) for d in runs]
+    assert max(r["started_at"] for r in results) < min(r["ended_at"] for r in results)     # --jobs 2: at once
+    rows = _csv(root)
+    assert {r["status"] for r in rows.values()} == {"completed"} and rows["run.dt_ms=2_seed=1"]["steps"] == "1800"
+    assert float(rows["run.dt_ms=1_seed=1"]["speed_p95_vb"]) > 0.5
+    assert (root / "sweep.run.dt_ms.png").stat().st_size > 10_000
+    before = {d.name: (d / "result.json").stat().st_mtime_ns for d in runs}
+    assert main(["sweep", str(f), "--jobs", "2", "--out", str(root)]) == 0
+    assert "s: 0 completed, 2 done before, 0 failed" in capsys.readouterr().out
+    assert {d.name: (d / "result.json").stat().st_mtime_ns for d in runs} == before
+
+
+@pytest.mark.slow
+def test_a_failing_point_fails_alone_and_an_interrupted_one_resumes(tmp_path, capsys):
+    """run.dt_ms = 100 (force: past the stability limit) breaks an invariant at its first frame; the dt = 1 point
+    was interrupted after 1000 steps before the sweep and resumes from its checkpoint."""
+    from taichimyxo.scene_run import run_scene
+    from taichimyxo.sweep import plan
+    from taichimyxo.sweep.rundir import prepare
+    f = sweep_file(tmp_path, "run.dt_ms = [1, 100]", "force = true")
+    root = tmp_path / "o"
+    sw, pts, _ = plan(f, root)
+    ok = pts[0]
+    d = prepare(ok, root, sw)
+    assert run_scene(ok.scene, out_dir=str(d), stop_after_steps=1000, progress=False)["status"] == "interrupted"
+    assert main(["sweep", str(f), "--dry-run", "--out", str(root)]) == 0
+    assert "interrupted run.dt_ms=1_seed=1" in capsys.readouterr().out
+    rc = main(["sweep", str(f), "--jobs", "2", "--out", str(root)])
+    out = capsys.readouterr()
+    assert rc == 1, out
+    assert "s: 1 completed, 0 done before, 1 failed" in out.out
+    assert "failed run.dt_ms=100_seed=1: stopped at step" in out.out and "segment lengths" in out.out
+    good = json.loads((d / "result.json").read_text())
+    assert good["status"] == "completed" and good["sessions"] == 2 and good["steps"] == 3600
+    rows = _csv(root)
+    assert rows["run.dt_ms=1_seed=1"]["status"] == "completed" and rows["run.dt_ms=1_seed=1"]["n_aggregates"] != ""
+    assert rows["run.dt_ms=100_seed=1"]["status"] == "failed" and "segment lengths" in rows["run.dt_ms=100_seed=1"][
+        "error"]
+    assert os.path.getsize(root / "sweep.csv") > 0
+
+
+@pytest.mark.slow
+def test_ctrl_c_keeps_finished_runs_and_checkpoints_the_running_ones(tmp_path):
+    """Ctrl-C to the sweep while one run has finished and another is running: exit 130, the finished run's files and
+    result intact, the running one closed with a checkpoint (the next sweep resumes it), the table says which."""
+    import signal
+    import subprocess
+    import sys
+    import time
+    f = sweep_file(tmp_path, "run.hours = [0.001, 0.05]")
+    f.write_text(f.read_text().replace("hours = 0.001\n", ""))
+    root = tmp_path / "o"
+    proc = subprocess.Popen([sys.executable, "-m", "taichimyxo", "sweep", str(f), "--jobs", "2", "--out", str(root)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
+    short = lambda: next((root / "runs").glob("run.hours=0.001_*"), None)      # noqa: E731
+    long_ = lambda: next((root / "runs").glob("run.hours=0.05_*"), None)       # noqa: E731
+    t0 = time.time()
+    while time.time() - t0 < 300:
+        if short() and (short() / "result.json").is_file() and long_() and \
+                "simulated (" in (long_() / "run.log").read_text(errors="replace"):
+            break
+        assert proc.poll() is None, proc.communicate()
+        time.sleep(0.2)
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, (out, err)
+    assert "1 completed, 0 done before, 0 failed, 1 interrupted or not started" in out, out
+    assert json.loads((short() / "result.json").read_text())["status"] == "completed"
+    name = long_().name.rsplit("-", 1)[0]
+    assert (long_() / f"{name}.ckpt.npz").is_file() and not (long_() / "result.json").exists()
+    assert json.loads((long_() / f"{name}.json").read_text())["status"] == "interrupted"
+    rows = _csv(root)
+    assert rows[short().name.rsplit("-", 1)[0]]["status"] == "completed" and rows[name]["status"] == "interrupted"
