@@ -7,6 +7,9 @@ import sys
 import taichi as ti
 
 _state = {"arch": None, "threads": None, "fp": None}
+# Simulations in this process: how many are open, how many were built since Taichi was (re)initialised, and whether
+# to restart Taichi before a new one when none is open (see simulation_starting)
+_sims = {"open": 0, "built": 0, "restart_when_idle": False}
 
 
 class BackendError(RuntimeError):
@@ -48,3 +51,30 @@ def init(arch: str = "cpu", threads: int | None = None, fallback: bool = True, q
 def reset() -> None:
     ti.reset()
     _state.update(arch=None, threads=None, fp=None)
+    _sims.update(open=0, built=0)
+
+
+def restart_between_simulations(on: bool = True) -> None:
+    """Restart Taichi before each Simulation built while no other is open (for the test suite and for callers that
+    build many Simulations one after another in one process). Taichi's offline cache keys a compiled kernel by the
+    ids of the fields it touches (taichi/analysis/gen_offline_cache_key.cpp), ids that only a restart starts again:
+    without it, a second Simulation of the same scene compiles every kernel again (~10 s) where, after a restart, it
+    loads them from the cache (~1 s). Off by default: a restart frees every Taichi field of the process, also ones
+    a caller made itself."""
+    _sims["restart_when_idle"] = bool(on)
+
+
+def simulation_starting() -> None:
+    """Called by each Simulation before it allocates its fields."""
+    if _sims["restart_when_idle"] and _sims["open"] == 0 and _sims["built"] > 0 and _state["arch"] is not None:
+        arch = "cpu" if _state.get("fell_back") else _state["arch"]
+        threads, fp = _state["threads"], _state["fp"]
+        reset()
+        init(arch, threads, default_fp=fp)
+    _sims["open"] += 1
+    _sims["built"] += 1
+
+
+def simulation_closed() -> None:
+    """Called once by each Simulation when it frees its fields."""
+    _sims["open"] = max(0, _sims["open"] - 1)

@@ -19,6 +19,7 @@ bit-identical runs, and a resumed run equals an uninterrupted one.
 import numpy as np
 import taichi as ti
 
+from . import backend
 from .frame import Frame
 from .integrators import make_integrator, records_contacts
 from .model import Model, field_bytes, fields_of
@@ -37,6 +38,8 @@ class Simulation:
         self.step_count = 0
         self.time_offset = 0.0      # simulated time of steps taken at another dt than the scene's, minus their share
         self.writers = []
+        self._closed = False
+        backend.simulation_starting()
         fb = ti.FieldsBuilder()
         self.state = State(self.layout, fb)
         self.neighbours = NeighbourList(self.state, fb, scene.width, scene.skin, **list_capacities(scene))
@@ -203,6 +206,9 @@ class Simulation:
         if self._tree is not None:
             self._tree.destroy()
             self._tree = None
+        if not self._closed:
+            self._closed = True
+            backend.simulation_closed()
 
 
 def make_simulation(scene, **kw) -> Simulation:

@@ -37,11 +37,16 @@ def fresh_taichi(request):
     compiled kernel by the ids of the fields it touches (taichi/analysis/gen_offline_cache_key.cpp), so a kernel
     compiled once, in any earlier test or run, is loaded instead of compiled again (~1-3 s instead of 10-30 s per
     Simulation): on a clean CI machine that is most of the suite's time."""
-    if request.node.get_closest_marker("keeps_taichi") is None:
-        from taichimyxo import backend
+    from taichimyxo import backend
+    keeps = request.node.get_closest_marker("keeps_taichi") is not None
+    if not keeps:
         backend.reset()
         backend.init("cpu", int(os.environ["TAICHIMYXO_THREADS"]), default_fp="f64")
+    # and restarted again before each further Simulation the test builds once the earlier ones are closed (three
+    # run_scene calls of one scene: one compile, two cache loads)
+    backend.restart_between_simulations(not keeps)
     yield
+    backend.restart_between_simulations(False)
 
 
 @pytest.fixture(scope="session")
