@@ -1,4 +1,4 @@
-"""Command line: python -m taichimyxo {list, keys, scene, render, analyze, claims, videos}.
+"""Command line: python -m taichimyxo {list, keys, scene, render, analyze, claims, videos, bench}.
 
 Bad input is one line on stderr naming the problem and a non-zero exit (2), before any simulation starts.
 Exit status: 0 done, 2 bad input, 3 a run stopped because its state broke a numerical invariant, 130 interrupted."""
@@ -117,6 +117,21 @@ def _build_parser() -> argparse.ArgumentParser:
     v.add_argument("--only", help="comma-separated scene names as `list` shows them, e.g. S3,S8,S2FigA")
     v.add_argument("--out", default="videos")
     v.add_argument("--arch", default="cpu", choices=ARCHES)
+
+    b = sub.add_parser("bench", help="measure the simulation's speed (taichimyxo/bench.py)")
+    bsub = b.add_subparsers(dest="bench", required=True, parser_class=_Parser)
+    t = bsub.add_parser("throughput", help="particle-steps per second of scenes at multiples of the paper's area, "
+                                           "and the projected wall time of a full 6 h S3")
+    t.add_argument("--arch", default="cpu", choices=ARCHES, help="cpu (default) or cuda, ...: no fallback")
+    t.add_argument("--sizes", default="1,4,16", help="multiples of each scene's area (default 1,4,16; cells scale "
+                                                     "with the area)")
+    t.add_argument("--scenes", default="S1,S3,S11", help="comma-separated scene names (default S1,S3,S11)")
+    t.add_argument("--steps", type=_positive_int, default=200, help="timed steps per measurement (default 200)")
+    t.add_argument("--warm", type=int, default=50, help="untimed steps first: compiling, list settling (default 50)")
+    t.add_argument("--threads", type=_positive_int, help="CPU threads (default: all cores)")
+    t.add_argument("--out", default="benchmarks-results",
+                   help="folder for throughput.csv / .json, merged with rows already there (default "
+                        "benchmarks-results/)")
     return p
 
 
@@ -259,6 +274,23 @@ def cmd_videos(args) -> int:
     return regenerate(preview=args.preview, only=args.only, out_dir=args.out, arch=args.arch)
 
 
+def cmd_bench(args) -> int:
+    from .backend import BackendError
+    from .bench import parse_sizes, throughput
+    try:
+        sizes = parse_sizes(args.sizes)
+    except ValueError as e:
+        return _fail(str(e))
+    scenes = [n.strip() for n in args.scenes.split(",") if n.strip()]
+    for name in scenes:
+        Scene.load(name)                   # an unknown scene: one line, exit 2, before anything is measured
+    try:
+        throughput(args.arch, sizes, scenes, args.steps, max(0, args.warm), args.out, threads=args.threads)
+    except BackendError as e:
+        return _fail(f"bench: {e} (the benchmark measures the arch it is given; no fallback)")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     args = _build_parser().parse_args(argv)
     try:
@@ -276,6 +308,8 @@ def main(argv: list[str] | None = None) -> int:
             return cmd_claims(args)
         if args.cmd == "videos":
             return cmd_videos(args)
+        if args.cmd == "bench":
+            return cmd_bench(args)
     except (SceneError, TrajectoryError) as e:
         return _fail(str(e))
     except KeyboardInterrupt:
