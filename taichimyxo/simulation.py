@@ -13,7 +13,8 @@ allocated. One Simulation per process compiles its kernels once; a second instan
 
 Determinism: every force is gathered, never scattered, over sorted neighbour lists; the only atomics are in the
 list build (sorted afterwards), the slime claim (max of cell index, a fixed rule) and flags. 1 and 2 threads give
-bit-identical runs, and a resumed run equals an uninterrupted one.
+bit-identical runs, and a resumed run equals an uninterrupted one. How the kernels launch their loops (serial or
+parallel, the scans) is the arch's loop shape, taichimyxo/launch.py.
 """
 
 import numpy as np

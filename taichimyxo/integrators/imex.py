@@ -33,7 +33,9 @@ matrix-free from the contacts each segment recorded while its forces were comput
 Each term's stiffness block lives with the term (Springs/Bending/Contacts.add_stiffness); this module holds the
 drag, the solver and the step; banded.py the per-cell matrices.
 Everything is gathered (each segment stores its own contacts; each cell gathers its rows), and reductions sum
-per-block partials in a fixed order, so runs are identical on 1 and 2 threads.
+per-block partials in a fixed order, so runs are identical on 1 and 2 threads. Blocks per arch (taichimyxo/launch.py):
+on the CPU at most 64 blocks of cells (one below 3000 segments), on a GPU one partial per cell, summed in groups of
+~sqrt(cells) in parallel and the group sums in one thread (`_group_sums`, `_reduce`), still in a fixed order.
 
 Contact modes (constructor argument, for the accuracy study):
   coupled   (default) the above;
