@@ -90,16 +90,10 @@ def make(scene, method: Method, positions=None, ke=None):
 
 
 def time_steps(sim, steps: int, warm: int) -> dict:
-    """Wall time of `steps` steps after `warm` steps (compilation and the first list builds excluded): ms per step,
-    particle-steps per second and the neighbour-list rebuilds they included."""
-    import time
-    sim.run(warm)
-    r0 = sim.rebuilds
-    t0 = time.perf_counter()
-    sim.run(steps)
-    wall = time.perf_counter() - t0
-    return {"particles": sim.n_p, "steps": steps, "wall_s": round(wall, 3), "ms_per_step": round(1e3 * wall / steps, 4),
-            "particle_steps_per_s": sim.n_p * steps / wall, "rebuilds": sim.rebuilds - r0}
+    """Wall time of `steps` steps after `warm` steps: taichimyxo.bench.time_steps (in the package, so the installed
+    `python -m taichimyxo bench` has it too)."""
+    from taichimyxo.bench import time_steps as package_time_steps
+    return package_time_steps(sim, steps, warm)
 
 
 def steps(t_s: float, dt_ms: float) -> int:

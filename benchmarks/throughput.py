@@ -5,7 +5,9 @@ ratio to the non-guided scene (S1) on the same start.
 
 Writes throughput.csv (throughput_quick.csv with --quick) and a .txt naming the machine into the output folder
 (default benchmarks-results/ in the current directory) and prints a table. Rates, never timed asserts: these
-machines are shared and noisy; ratios within one run are what to compare.
+machines are shared and noisy; ratios within one run are what to compare. The measuring itself is the package's
+(taichimyxo/bench.py, also `python -m taichimyxo bench throughput`: S1, S3, S11 at 1x, 4x, 16x the paper's area,
+on the CPU or a GPU, with the projected wall time of a full 6 h S3).
 """
 from __future__ import annotations
 
@@ -30,32 +32,11 @@ SCENES = [
 
 def measure(name: str, scale: float, n_steps: int, warm: int, precision: str | None = None,
             integrator: str | None = None) -> dict:
-    from taichimyxo.scene import Scene
-    from taichimyxo.simulation import make_simulation
-    over = {"output": {"movie": False}}
-    if scale != 1.0:
-        sc0 = Scene.load(name)
-        over["domain"] = {"width_um": sc0.box[0] * scale, "height_um": sc0.box[1] * scale}
-        if sc0.raw["population"]["cells"]:
-            over["population"] = {"cells": max(1, round(sc0.n_cells * scale * scale))}
-    if precision:
-        over.setdefault("run", {})["precision"] = precision
-    if integrator:
-        over.setdefault("run", {})["integrator"] = integrator
-    sc = Scene.load(name, over)
-    t0 = time.perf_counter()
-    sim = make_simulation(sc)
-    sim.run(warm)                                   # compiles and settles the neighbour list
-    setup = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    sim.run(n_steps)
-    wall = time.perf_counter() - t0
-    row = {"scene": name, "scale": scale, "cells": sc.n_cells, "particles": sim.n_p, "precision": sc.precision,
-           "integrator": sc.integrator, "dt_ms": sc.dt * 1e3, "steps": n_steps, "wall_s": round(wall, 4),
-           "steps_per_s": round(n_steps / wall, 1), "particle_steps_per_s": round(n_steps * sim.n_p / wall),
-           "simulated_s_per_wall_s": round(n_steps * sc.dt / wall, 3), "setup_s": round(setup, 2),
-           "rebuilds": sim.rebuilds, "serial_loops": sim.serial}
-    sim.close()
+    """One row: taichimyxo.bench.measure at `scale` times the scene's side (its area times scale^2)."""
+    from taichimyxo.bench import measure as package_measure
+    run = {k: v for k, v in (("precision", precision), ("integrator", integrator)) if v}
+    row = package_measure(name, scale * scale, n_steps, warm, run or None)
+    row["scale"] = scale
     return row
 
 

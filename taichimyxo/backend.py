@@ -39,6 +39,7 @@ def init(arch: str = "cpu", threads: int | None = None, fallback: bool = True, q
         if ti.lang.impl.current_cfg().arch == ti.cpu or ti.lang.impl.current_cfg().arch == ti.x64 or \
                 ti.lang.impl.current_cfg().arch == ti.arm64:
             if not fallback:
+                _state.update(arch=None, threads=None, fp=None)    # Taichi was restarted (on the CPU): re-init next
                 raise BackendError(f"--arch {arch}: not available on this machine")
             print(f"taichimyxo: arch {arch} is not available here; running on the CPU instead", file=sys.stderr)
             used = "cpu"
@@ -78,3 +79,13 @@ def simulation_starting() -> None:
 def simulation_closed() -> None:
     """Called once by each Simulation when it frees its fields."""
     _sims["open"] = max(0, _sims["open"] - 1)
+
+
+def restart() -> str:
+    """Taichi restarted with the current arch, threads and float literals, so the next fields get the ids of a fresh
+    process (Taichi's offline cache keys a kernel by them: a kernel compiled by another process is then loaded)."""
+    arch, threads, fp = _state["arch"], _state["threads"], _state["fp"]
+    if arch is None:
+        raise BackendError("restart: Taichi is not initialised")
+    reset()
+    return init(arch, threads, fallback=False, default_fp=fp)

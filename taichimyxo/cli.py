@@ -1,4 +1,4 @@
-"""Command line: python -m taichimyxo {list, keys, scene, render, analyze, claims, videos, sweep}.
+"""Command line: python -m taichimyxo {list, keys, scene, render, analyze, claims, videos, sweep, bench}.
 
 Bad input is one line on stderr naming the problem and a non-zero exit (2), before any simulation starts.
 Exit status: 0 done, 2 bad input, 3 a run stopped because its state broke a numerical invariant, 130 interrupted;
@@ -127,6 +127,21 @@ def _build_parser() -> argparse.ArgumentParser:
     w.add_argument("--out", help="results folder (default sweeps-results/NAME, NAME the sweep's)")
     w.add_argument("--dry-run", action="store_true", help="validate, list the points and their folders; run nothing")
     _executor_arguments(w, "runs at a time (default: the number of cores), each on one thread")
+
+    b = sub.add_parser("bench", help="measure the simulation's speed (taichimyxo/bench.py)")
+    bsub = b.add_subparsers(dest="bench", required=True, parser_class=_Parser)
+    t = bsub.add_parser("throughput", help="particle-steps per second of scenes at multiples of the paper's area, "
+                                           "and the projected wall time of a full 6 h S3")
+    t.add_argument("--arch", default="cpu", choices=ARCHES, help="cpu (default) or cuda, ...: no fallback")
+    t.add_argument("--sizes", default="1,4,16", help="multiples of each scene's area (default 1,4,16; cells scale "
+                                                     "with the area)")
+    t.add_argument("--scenes", default="S1,S3,S11", help="comma-separated scene names (default S1,S3,S11)")
+    t.add_argument("--steps", type=_positive_int, default=200, help="timed steps per measurement (default 200)")
+    t.add_argument("--warm", type=int, default=50, help="untimed steps first: compiling, list settling (default 50)")
+    t.add_argument("--threads", type=_positive_int, help="CPU threads (default: all cores)")
+    t.add_argument("--out", default="benchmarks-results",
+                   help="folder for throughput.csv / .json, merged with rows already there (default "
+                        "benchmarks-results/)")
     return p
 
 
@@ -336,6 +351,23 @@ def cmd_sweep(args) -> int:
     return EXIT_RUN_FAILED if c["failed"] else 0
 
 
+def cmd_bench(args) -> int:
+    from .backend import BackendError
+    from .bench import parse_sizes, throughput
+    try:
+        sizes = parse_sizes(args.sizes)
+    except ValueError as e:
+        return _fail(str(e))
+    scenes = [n.strip() for n in args.scenes.split(",") if n.strip()]
+    for name in scenes:
+        Scene.load(name)                   # an unknown scene: one line, exit 2, before anything is measured
+    try:
+        throughput(args.arch, sizes, scenes, args.steps, max(0, args.warm), args.out, threads=args.threads)
+    except BackendError as e:
+        return _fail(f"bench: {e} (the benchmark measures the arch it is given; no fallback)")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     args = _build_parser().parse_args(argv)
     try:
@@ -355,6 +387,8 @@ def main(argv: list[str] | None = None) -> int:
             return cmd_videos(args)
         if args.cmd == "sweep":
             return cmd_sweep(args)
+        if args.cmd == "bench":
+            return cmd_bench(args)
     except (SceneError, TrajectoryError) as e:
         return _fail(str(e))
     except KeyboardInterrupt:

@@ -56,7 +56,7 @@ class Model:
     @ti.func
     def pairs(self):
         st = self.state
-        ti.loop_config(serialize=st.serial)
+        ti.loop_config(**st.loops.items)
         for s in range(st.n_s):
             for u in ti.static(self.pair_terms):
                 u.pair_pass(s)
@@ -119,7 +119,7 @@ class Model:
     def _evaluate(self, f_int: ti.template(), f_tot: ti.template(), tan: ti.template()):
         st = self.state
         self.pairs()
-        ti.loop_config(serialize=st.serial)
+        ti.loop_config(**st.loops.items)
         for c in range(st.n_cells):
             x0, X, F, T, Fi = self.cell_forces(c)
             for k in ti.static(range(self.N)):

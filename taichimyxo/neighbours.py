@@ -15,10 +15,15 @@ whatever the speed; a pair farther apart than W + skin at the build cannot touch
 
 Determinism: the build counts into bins with atomics, but each row is sorted afterwards, so the lists and every sum
 over them are independent of thread scheduling.
+
+Per arch (taichimyxo/launch.py): every loop of the build is parallel over segments or bins, except the bins' prefix
+sum, which runs in one thread on the CPU and as a two-level blocked scan on a GPU (`_scan_bins`); both give the same
+bin_start, so the lists are the same on either shape.
 """
 
 import taichi as ti
 
+from .launch import scan_block
 from .state import SEGMENT_LENGTH_TOL, State, closest_points
 
 # the grid holds segments up to 1.5 l0, the bound frames check too: a longer one (a blown-up chain) could escape
@@ -68,6 +73,10 @@ class NeighbourList:
         self.bin_cursor = st.scalar(fb, nb, ti.i32)
         self.bin_items = st.scalar(fb, S, ti.i32)
         self.seg_bin = st.scalar(fb, S, ti.i32)
+        if st.loops.gpu:                                    # the blocked scan's block totals (launch.py)
+            self.scan_block = scan_block(nb)
+            self.n_scan_blocks = (nb + self.scan_block - 1) // self.scan_block
+            self.bin_block = st.scalar(fb, self.n_scan_blocks, ti.i32)
         # 0: contact list overflow, 1: a particle moved past half the skin, 2: guiding list overflow,
         # 3: a segment longer than l_max
         self.flags = st.scalar(fb, 4, ti.i32)
@@ -105,10 +114,10 @@ class NeighbourList:
         cut_c = ti.static(self.contact_cutoff * 1.001)       # a margin far above rounding
         cut_g = ti.static(self.guiding_cutoff * 1.001)
         l_max = ti.static(self.l_max)
-        ti.loop_config(serialize=st.serial)
+        ti.loop_config(**st.loops.items)
         for i in range(nbx * nby):
             self.bin_count[i] = 0
-        ti.loop_config(serialize=st.serial)
+        ti.loop_config(**st.loops.items)
         for s in range(st.n_s):
             m = st.seg_mid(s)
             a, b = st.seg_ends(s)
@@ -120,20 +129,23 @@ class NeighbourList:
             bn = bx * nby + by
             self.seg_bin[s] = bn
             ti.atomic_add(self.bin_count[bn], 1)
-        ti.loop_config(serialize=True)
-        for i in range(nbx * nby + 1):
-            if i == 0:
-                self.bin_start[0] = 0
-            else:
-                self.bin_start[i] = self.bin_start[i - 1] + self.bin_count[i - 1]
-        ti.loop_config(serialize=st.serial)
-        for i in range(nbx * nby):
-            self.bin_cursor[i] = self.bin_start[i]
-        ti.loop_config(serialize=st.serial)
+        if ti.static(st.loops.gpu):
+            self._scan_bins()
+        else:
+            ti.loop_config(**st.loops.one_thread)
+            for i in range(nbx * nby + 1):
+                if i == 0:
+                    self.bin_start[0] = 0
+                else:
+                    self.bin_start[i] = self.bin_start[i - 1] + self.bin_count[i - 1]
+            ti.loop_config(**st.loops.items)
+            for i in range(nbx * nby):
+                self.bin_cursor[i] = self.bin_start[i]
+        ti.loop_config(**st.loops.items)
         for s in range(st.n_s):
             k = ti.atomic_add(self.bin_cursor[self.seg_bin[s]], 1)
             self.bin_items[k] = s
-        ti.loop_config(serialize=st.serial)
+        ti.loop_config(**st.loops.items)
         for s in range(st.n_s):
             cs = s // (N - 1)
             ks = s % (N - 1)
@@ -184,7 +196,7 @@ class NeighbourList:
                     ng = ti.min(ng, self.max_guides)
                     self.guide_n[row_g] = ng
                     self._sort_row(self.guide, row_g, ng)
-        ti.loop_config(serialize=st.serial)
+        ti.loop_config(**st.loops.items)
         for s in range(st.n_s):
             for q in range(self.nbr_n[s]):
                 t = self.nbr[s, q]
@@ -193,10 +205,39 @@ class NeighbourList:
                     for q2 in range(self.nbr_n[t]):
                         if self.nbr[t, q2] == s:
                             self.rev[s, q] = q2
-        ti.loop_config(serialize=st.serial)
+        ti.loop_config(**st.loops.items)
         for p in range(st.n_p):
             self.x_ref[p] = st.x[p]
         self.flags[1] = 0
+
+    @ti.func
+    def _scan_bins(self):
+        """bin_start (exclusive prefix sum of bin_count) and bin_cursor, the gpu shape's two-level blocked scan:
+        each block's total in parallel, the totals' scan in one thread, each block's own scan in parallel."""
+        st = self.state
+        nb = ti.static(self.nbx * self.nby)
+        G = ti.static(self.scan_block)
+        ti.loop_config(**st.loops.items)
+        for k in range(self.n_scan_blocks):
+            acc = 0
+            for i in range(k * G, ti.min((k + 1) * G, nb)):
+                acc += self.bin_count[i]
+            self.bin_block[k] = acc
+        ti.loop_config(**st.loops.one_thread)
+        for _ in range(1):
+            acc = 0
+            for k in range(self.n_scan_blocks):
+                c = self.bin_block[k]
+                self.bin_block[k] = acc
+                acc += c
+            self.bin_start[nb] = acc
+        ti.loop_config(**st.loops.items)
+        for k in range(self.n_scan_blocks):
+            acc = self.bin_block[k]
+            for i in range(k * G, ti.min((k + 1) * G, nb)):
+                self.bin_start[i] = acc
+                self.bin_cursor[i] = acc
+                acc += self.bin_count[i]
 
     def rebuild(self) -> None:
         self.flags[0] = self.flags[2] = self.flags[3] = 0

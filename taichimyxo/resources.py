@@ -38,8 +38,9 @@ def _fmt(n: float) -> str:
 def field_sizes(scene, contacts: str = "coupled") -> dict:
     """Name -> (entries, bytes) of every field the scene's Simulation allocates (state.py, neighbours.py, the units
     of terms/ and the integrator), by the same rules."""
+    from .launch import shape_for
     from .neighbours import grid_radius
-    from .state import SERIAL_BELOW_SEGMENTS, list_capacities
+    from .state import list_capacities
     n, N = scene.n_cells, scene.N
     P, S, C = n * N, n * (N - 1), n
     pb = 8 if scene.precision in ("f64", "mixed") else 4         # positions
@@ -98,7 +99,7 @@ def field_sizes(scene, contacts: str = "coupled") -> dict:
             for k in ("cg_r", "cg_u", "cg_w", "cg_p", "cg_s", "vprev"):
                 out[k] = (2 * P, 2 * P * fb)
             out["active"] = (C, C * 4)
-            nblk = 1 if S < SERIAL_BELOW_SEGMENTS else min(C, 64)
+            nblk = shape_for(S, "cpu").cell_blocks(C)        # the CPU's (a GPU's fields are on the device)
             out["part"] = (nblk * 3, nblk * 3 * 8)
         out["cgs"] = (8, 64)
         out["cgi"] = (8, 32)

@@ -13,7 +13,8 @@ allocated. One Simulation per process compiles its kernels once; a second instan
 
 Determinism: every force is gathered, never scattered, over sorted neighbour lists; the only atomics are in the
 list build (sorted afterwards), the slime claim (max of cell index, a fixed rule) and flags. 1 and 2 threads give
-bit-identical runs, and a resumed run equals an uninterrupted one.
+bit-identical runs, and a resumed run equals an uninterrupted one. How the kernels launch their loops (serial or
+parallel, the scans) is the arch's loop shape, taichimyxo/launch.py.
 """
 
 import numpy as np
@@ -24,14 +25,16 @@ from .frame import Frame
 from .integrators import make_integrator, records_contacts
 from .model import Model, field_bytes, fields_of
 from .neighbours import NeighbourList, NeighbourOverflow  # noqa: F401  (NeighbourOverflow: API)
+from .launch import shape_for
 from .state import Layout, State, list_capacities
 
 
 class Simulation:
     def __init__(self, scene, positions: np.ndarray | None = None, engine_direction: np.ndarray | None = None,
-                 **integrator_options):
+                 loop_shape: str | None = None, **integrator_options):
         """Build fields for `scene` and load the initial configuration (from the scene's start unless positions,
-        (n_cells, N, 2) µm, and engine_direction, (n_cells,) ±1, are given). integrator_options go to the
+        (n_cells, N, 2) µm, and engine_direction, (n_cells,) ±1, are given). loop_shape: "cpu" or "gpu" forces how the
+        kernels launch their loops (taichimyxo/launch.py; default: the arch's). integrator_options go to the
         integrator (imex: contacts = coupled | diagonal | explicit, tol, max_iter)."""
         self.scene = scene
         self.layout = Layout.from_scene(scene)
@@ -41,7 +44,7 @@ class Simulation:
         self._closed = False
         backend.simulation_starting()
         fb = ti.FieldsBuilder()
-        self.state = State(self.layout, fb)
+        self.state = State(self.layout, fb, shape_for(self.layout.n_segments, loop_shape))
         self.neighbours = NeighbourList(self.state, fb, scene.width, scene.skin, **list_capacities(scene))
         self.model = Model(scene, self.state, self.neighbours, fb,
                            record_contacts=records_contacts(scene, **integrator_options))

@@ -7,7 +7,6 @@ precision (f64 for 'f64' and 'mixed'), forces and offsets in force precision (f3
 """
 
 import math
-import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -15,10 +14,7 @@ import taichi as ti
 
 from .frame import unwrap_chains
 from .geometry import min_image as np_min_image
-
-# Taichi's CPU backend spends ~75 µs launching a parallel loop; below a few thousand segments one thread running the
-# loops serially is faster than two threads (measured: benchmarks/throughput.py).
-SERIAL_BELOW_SEGMENTS = int(os.environ.get("TAICHIMYXO_SERIAL_BELOW", "3000"))
+from .launch import LoopShape, shape_for
 from .geometry import SEGMENT_LENGTH_TOL  # noqa: F401,E402  (re-exported; defined where taichi is not imported)
 
 
@@ -122,15 +118,17 @@ class Layout:
 
 @ti.data_oriented
 class State:
-    """Positions x (wrapped), engine directions ke = ±1 (+1: particle 0 is the head) and the speed-window snapshot."""
+    """Positions x (wrapped), engine directions ke = ±1 (+1: particle 0 is the head) and the speed-window snapshot.
+    `loops` (taichimyxo/launch.py) is how every unit's kernels launch their loops: the arch's shape unless given."""
 
-    def __init__(self, layout: Layout, fb: ti.FieldsBuilder):
+    def __init__(self, layout: Layout, fb: ti.FieldsBuilder, loops: LoopShape | None = None):
         self.layout = L = layout
         self.N, self.Lx, self.Ly = L.N, L.Lx, L.Ly
         self.n_cells, self.n_p, self.n_s = L.n_cells, L.n_particles, L.n_segments
         self.pdt = ti.f64 if L.precision in ("f64", "mixed") else ti.f32
         self.fdt = ti.f64 if L.precision == "f64" else ti.f32
-        self.serial = self.n_s < SERIAL_BELOW_SEGMENTS
+        self.loops = loops or shape_for(self.n_s)
+        self.serial = self.loops.serial                     # loops over items in one thread (CPU, small systems)
         self.x = self.vec(fb, self.n_p, self.pdt)            # positions, wrapped
         self.x_snap = self.vec(fb, self.n_p, self.pdt)       # positions at the start of the speed window
         self.ke = self.scalar(fb, self.n_cells, ti.i32)      # engine direction k_e = ±1
@@ -192,7 +190,7 @@ class State:
 
     @ti.kernel
     def _copy_snap(self):
-        ti.loop_config(serialize=self.serial)
+        ti.loop_config(**self.loops.items)
         for p in range(self.n_p):
             self.x_snap[p] = self.x[p]
 

@@ -11,6 +11,7 @@
 - `shapes`: simtools' chains to place by hand (cell, arc_cell, ring_radius_for_gap), in µm.
 The builders themselves (chains, scenes, simulations) are in tests/simtools.py, the one place they are written.
 - marker `slow`: tests that take more than a few seconds.
+- marker `gpu`: tests that run on CUDA (tests/test_gpu.py; skipped where there is none).
 """
 from __future__ import annotations
 
@@ -28,6 +29,7 @@ def pytest_configure(config):
     config.addinivalue_line("markers", "slow: slower than a few seconds (still part of the default run)")
     config.addinivalue_line("markers", "keeps_taichi: the module holds Simulations in module-scoped fixtures, so "
                                        "Taichi is not restarted before each of its tests")
+    config.addinivalue_line("markers", "gpu: runs on CUDA (skipped with one line where CUDA is not available)")
 
 
 @pytest.fixture(autouse=True)

@@ -25,7 +25,7 @@ class Explicit:
         m = self.model
         N = ti.static(self.N)
         m.pairs()
-        ti.loop_config(serialize=st.serial)
+        ti.loop_config(**st.loops.items)
         for c in range(st.n_cells):
             x0, X, F, T, Fi = m.cell_forces(c)
             moved = 0
@@ -47,7 +47,7 @@ class Explicit:
                 moved |= self.nl.store(c * N + k, xn)
             m.after_move(c, moved)
         if ti.static(m.has_slime):
-            ti.loop_config(serialize=st.serial)
+            ti.loop_config(**st.loops.items)
             for c in range(st.n_cells):
                 m.deposit(c)
         return self.nl.flags[1]

@@ -33,7 +33,9 @@ matrix-free from the contacts each segment recorded while its forces were comput
 Each term's stiffness block lives with the term (Springs/Bending/Contacts.add_stiffness); this module holds the
 drag, the solver and the step; banded.py the per-cell matrices.
 Everything is gathered (each segment stores its own contacts; each cell gathers its rows), and reductions sum
-per-block partials in a fixed order, so runs are identical on 1 and 2 threads.
+per-block partials in a fixed order, so runs are identical on 1 and 2 threads. Blocks per arch (taichimyxo/launch.py):
+on the CPU at most 64 blocks of cells (one below 3000 segments), on a GPU one partial per cell, summed in groups of
+~sqrt(cells) in parallel and the group sums in one thread (`_group_sums`, `_reduce`), still in a fixed order.
 
 Contact modes (constructor argument, for the accuracy study):
   coupled   (default) the above;
@@ -49,6 +51,7 @@ import math
 
 import taichi as ti
 
+from ..launch import scan_block
 from .banded import BandedCells
 
 CONTACT_MODES = ("coupled", "diagonal", "explicit")
@@ -76,7 +79,7 @@ class Imex:
         self.N, self.n2 = scene.N, 2 * scene.N
         self.zeta_t, self.zeta_n = scene.zeta_t, scene.zeta_n
         C, P = state.n_cells, state.n_p
-        self.nblk = 1 if state.serial else min(C, 64)
+        self.nblk = state.loops.cell_blocks(C)   # partial sums per block of cells (launch.py: CPU <= 64, GPU one a cell)
         self.bs = (C + self.nblk - 1) // self.nblk
         self.band = BandedCells(C, scene.N, state.fdt, fb)
 
@@ -94,6 +97,11 @@ class Imex:
             self.active = state.scalar(fb, C, ti.i32)     # cell takes part in the CG (it has contacts)
             self.part = ti.field(ti.f64)
             fb.dense(ti.ij, (self.nblk, 3)).place(self.part)
+            if state.loops.gpu:                   # the two-level reduction: sums of groups of ~sqrt(nblk) partials
+                self.grp = scan_block(self.nblk)
+                self.ngrp = (self.nblk + self.grp - 1) // self.grp
+                self.part2 = ti.field(ti.f64)
+                fb.dense(ti.ij, (self.ngrp, 3)).place(self.part2)
         self.cgs = ti.field(ti.f64)               # 0 gamma, 1 delta, 2 gamma_b, 3 alpha, 4 beta
         self.cgi = ti.field(ti.i32)               # 0 state (0 iterating, 1 converged, 2 step done), 1 iterations
         fb.dense(ti.i, 8).place(self.cgs, self.cgi)   # this step, 2 total iterations, 3 steps
@@ -175,7 +183,7 @@ class Imex:
     def _deposit_pass(self, gated: ti.template()):
         m = self.model
         if ti.static(m.has_slime):
-            ti.loop_config(serialize=self.state.serial)
+            ti.loop_config(**self.state.loops.items)
             for c in range(self.state.n_cells):
                 if not gated or self.cgi[0] == 1:
                     m.deposit(c)
@@ -190,18 +198,18 @@ class Imex:
         dtf = ti.cast(dt, self.state.fdt)
         self.model.pairs()
         if ti.static(not self.coupled):
-            ti.loop_config(serialize=self.state.serial)
+            ti.loop_config(**self.state.loops.items)
             for c in range(C):
                 self._load_cell(c)
                 self._factor(c, dtf)
                 self.band.solve(c, self.rhs, self.vel)
                 self._advance_cell(c, dt)
             self._deposit_pass(False)
-            ti.loop_config(serialize=True)
+            ti.loop_config(**self.state.loops.one_thread)
             for _ in range(1):
                 self.cgi[3] += 1
         else:
-            ti.loop_config(serialize=self.state.serial)
+            ti.loop_config(**self.state.loops.items)
             for b in range(self.nblk):
                 g = ti.cast(0.0, ti.f64)
                 gb = ti.cast(0.0, ti.f64)
@@ -233,7 +241,8 @@ class Imex:
                 self.part[b, 0] = g
                 self.part[b, 2] = gb
             self._apply_A(dtf, False)
-            ti.loop_config(serialize=True)
+            self._group_sums()
+            ti.loop_config(**self.state.loops.one_thread)
             for _ in range(1):
                 gam, dlt, gb = self._reduce()
                 self.cgs[0] = gam
@@ -250,22 +259,42 @@ class Imex:
 
     @ti.func
     def _reduce(self):
-        """Sums of the per-block partials (gamma, delta, gamma_b), in block order: the same on any thread count."""
+        """Sums of the per-block partials (gamma, delta, gamma_b), in block order: the same on any thread count (gpu
+        shape: of the group sums, each in block order)."""
         gam = ti.cast(0.0, ti.f64)
         dlt = ti.cast(0.0, ti.f64)
         gb = ti.cast(0.0, ti.f64)
-        for b in range(self.nblk):
-            gam += self.part[b, 0]
-            dlt += self.part[b, 1]
-            gb += self.part[b, 2]
+        if ti.static(self.state.loops.gpu):
+            for g in range(self.ngrp):
+                gam += self.part2[g, 0]
+                dlt += self.part2[g, 1]
+                gb += self.part2[g, 2]
+        else:
+            for b in range(self.nblk):
+                gam += self.part[b, 0]
+                dlt += self.part[b, 1]
+                gb += self.part[b, 2]
         return gam, dlt, gb
+
+    @ti.func
+    def _group_sums(self):
+        """gpu shape: the reduction's first level, in parallel: part2[g] = the partials of group g, in block order."""
+        if ti.static(self.state.loops.gpu):
+            G = ti.static(self.grp)
+            ti.loop_config(**self.state.loops.items)
+            for g in range(self.ngrp):
+                for k in ti.static(range(3)):
+                    acc = ti.cast(0.0, ti.f64)
+                    for b in range(g * G, ti.min((g + 1) * G, self.nblk)):
+                        acc += self.part[b, k]
+                    self.part2[g, k] = acc
 
     @ti.func
     def _apply_A(self, dtf, gated: ti.template()):
         """w = A u (gathering neighbours' u), per-block partials of u.w; gated: only while CG is iterating."""
         C = ti.static(self.state.n_cells)
         bs = ti.static(self.bs)
-        ti.loop_config(serialize=self.state.serial)
+        ti.loop_config(**self.state.loops.items)
         for b in range(self.nblk):
             d = ti.cast(0.0, ti.f64)
             if not gated or self.cgi[0] == 0:
@@ -282,7 +311,7 @@ class Imex:
         bs = ti.static(self.bs)
         dtf = ti.cast(dt, self.state.fdt)
         for _it in ti.static(range(self.iters_per_launch)):
-            ti.loop_config(serialize=self.state.serial)
+            ti.loop_config(**self.state.loops.items)
             for b in range(self.nblk):
                 g = ti.cast(0.0, ti.f64)
                 if self.cgi[0] == 0:
@@ -303,7 +332,8 @@ class Imex:
                         g += self.band.dot(c, self.cg_r, self.cg_u)
                 self.part[b, 0] = g
             self._apply_A(dtf, True)
-            ti.loop_config(serialize=True)
+            self._group_sums()
+            ti.loop_config(**self.state.loops.one_thread)
             for _ in range(1):
                 if self.cgi[0] == 0:
                     gam, dlt, gb_unused = self._reduce()
@@ -324,7 +354,7 @@ class Imex:
 
     @ti.func
     def _finish(self, dt):
-        ti.loop_config(serialize=self.state.serial)
+        ti.loop_config(**self.state.loops.items)
         for c in range(self.state.n_cells):
             if self.cgi[0] == 1:
                 self._advance_cell(c, dt)
@@ -332,14 +362,14 @@ class Imex:
                 for i in range(self.n2):
                     self.vprev[base + i] = self.vel[base + i]
         self._deposit_pass(True)
-        ti.loop_config(serialize=True)
+        ti.loop_config(**self.state.loops.one_thread)
         for _ in range(1):
             if self.cgi[0] == 1:
                 self.cgi[0] = 2
 
     @ti.kernel
     def _imex_finish(self, dt: ti.f64):
-        ti.loop_config(serialize=True)
+        ti.loop_config(**self.state.loops.one_thread)
         for _ in range(1):
             self.cgi[0] = 1
         self._finish(dt)

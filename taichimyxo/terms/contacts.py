@@ -342,7 +342,7 @@ class Contacts:
 
     @ti.kernel
     def _segment_forces_to(self, out_a: ti.template(), out_b: ti.template()):
-        ti.loop_config(serialize=self.state.serial)
+        ti.loop_config(**self.state.loops.items)
         for s in range(self.state.n_s):
             fa, fb = self.segment_forces(s)
             out_a[s] = ti.cast(fa, ti.f64)

@@ -40,7 +40,7 @@ class Reversals:
     @ti.kernel
     def start(self):
         """Periods drawn, initial phases uniform."""
-        ti.loop_config(serialize=self.state.serial)
+        ti.loop_config(**self.state.loops.items)
         for c in range(self.state.n_cells):
             p = self.draw_period(c, 0)
             u = uniform_ti(ti.u32(self.seed), ti.u32(STREAM_REVERSAL + 100), ti.u32(c), ti.u32(0))

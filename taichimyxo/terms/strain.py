@@ -15,7 +15,7 @@ class Strain:
     def __init__(self, contacts, fb):
         self.contacts = contacts
         st = contacts.state
-        self.N, self.n_cells, self.n_s, self.serial = st.N, st.n_cells, st.n_s, st.serial
+        self.N, self.n_cells, self.n_s, self.loops = st.N, st.n_cells, st.n_s, st.loops
         self.strain_seg = st.scalar(fb, st.n_s, ti.f64)
 
     @ti.kernel
@@ -23,7 +23,7 @@ class Strain:
         ct = self.contacts
         nl = self.contacts.nl
         N = ti.static(self.N)
-        ti.loop_config(serialize=self.serial)
+        ti.loop_config(**self.loops.items)
         for s in range(self.n_s):
             e = ti.cast(0.0, ti.f64)
             ks = s % (N - 1)
