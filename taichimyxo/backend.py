@@ -1,6 +1,8 @@
 """Taichi initialisation: one place that picks the arch and thread count, with a clear fallback message."""
 from __future__ import annotations
 
+import contextlib
+import io
 import os
 import sys
 
@@ -70,8 +72,9 @@ def simulation_starting() -> None:
     if _sims["restart_when_idle"] and _sims["open"] == 0 and _sims["built"] > 0 and _state["arch"] is not None:
         arch = "cpu" if _state.get("fell_back") else _state["arch"]
         threads, fp = _state["threads"], _state["fp"]
-        reset()
-        init(arch, threads, default_fp=fp)
+        with contextlib.redirect_stdout(io.StringIO()):    # Taichi's start banner, not the caller's output
+            reset()
+            init(arch, threads, default_fp=fp)
     _sims["open"] += 1
     _sims["built"] += 1
 
