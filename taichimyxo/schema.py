@@ -78,7 +78,7 @@ SCHEMA: dict[str, dict[str, tuple]] = {
         "precision": (_S, "mixed", ("f32", "f64", "mixed"), "f32, f64, or mixed (f64 positions, f32 forces)"),
         "seed": (_I, 1, "nonneg", "random seed"),
         "mass_pg": (_F, 0.0, "nonneg", "particle mass for the semi-implicit Euler step, pg; 0 = overdamped"),
-        "skin_um": (_F, 0.3, "pos", "neighbour-list skin, µm"),
+        "skin_um": (_F, 0.1, "pos", "neighbour-list skin, µm (0.1: fastest of 0.1-0.45 in sparse and dense scenes, README \"Speed\")"),
         "max_neighbours": (_I, 0, "nonneg", "neighbour-list capacity per segment; 0 = from density"),
         "speed_window_s": (_F, 1.0, "pos", "window over which displayed speeds are averaged, s"),
     },
