@@ -7,23 +7,19 @@ On a terminal the line is redrawn in place every second; to a file or a pipe it 
 run that ends gets a line of its own either way (a failed one with its error)."""
 from __future__ import annotations
 
-import sys
 import time
 
-from ..progress import duration
+from ..progress import StatusLine, duration
 
 
 class SweepProgress:
     def __init__(self, name: str, total: int, skipped: int, jobs: int, stream=None, interval_s: float | None = None):
-        self.stream = stream or sys.stderr
-        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
-        self.interval = interval_s if interval_s is not None else (1.0 if self.tty else 60.0)
+        self.status = StatusLine(stream, interval_s, file_interval_s=60.0)
+        self.stream = self.status.stream
         self.name, self.total, self.skipped, self.jobs = name, total, skipped, max(1, jobs)
         self.running: dict[str, float] = {}
         self.counts = {"completed": 0, "failed": 0, "interrupted": 0}
         self.durations: list[float] = []
-        self.last = -float("inf")
-        self.width = 0
 
     # ---- what executors call
     def started(self, run_dir: str) -> None:
@@ -47,28 +43,20 @@ class SweepProgress:
             self.note(f"{status} {name}")
 
     def note(self, text: str) -> None:
-        self._clear()
+        self.status.clear()
         self.stream.write(f"{self.name}: {text}\n")
         self.stream.flush()
         self.tick(force=True)
 
     def tick(self, force: bool = False) -> None:
-        now = time.monotonic()
-        if not force and now - self.last < self.interval:
+        if not self.status.due(force):
             return
-        if not self.tty and force:
+        if not self.status.tty and force:
             return                  # to a file: events have their own lines, the status line every interval
-        self.last = now
-        text = self.line()
-        if self.tty:
-            self.stream.write("\r" + text.ljust(self.width))
-            self.width = len(text)
-        else:
-            self.stream.write(text + "\n")
-        self.stream.flush()
+        self.status.show(self.line())
 
     def close(self) -> None:
-        self._clear()
+        self.status.clear()
         self.stream.write(self.line() + "\n")
         self.stream.flush()
 
@@ -103,8 +91,3 @@ class SweepProgress:
         extra = f", {self.counts['interrupted']} interrupted" if self.counts["interrupted"] else ""
         return (f"{self.name}: {done} of {self.total} done{earlier}, {len(self.running)} running, "
                 f"{self.counts['failed']} failed{extra}, {self.waiting} waiting; {left}")
-
-    def _clear(self) -> None:
-        if self.tty and self.width:
-            self.stream.write("\r" + " " * self.width + "\r")
-            self.width = 0
