@@ -70,11 +70,8 @@ def restart_between_simulations(on: bool = True) -> None:
 def simulation_starting() -> None:
     """Called by each Simulation before it allocates its fields."""
     if _sims["restart_when_idle"] and _sims["open"] == 0 and _sims["built"] > 0 and _state["arch"] is not None:
-        arch = "cpu" if _state.get("fell_back") else _state["arch"]
-        threads, fp = _state["threads"], _state["fp"]
         with contextlib.redirect_stdout(io.StringIO()):    # Taichi's start banner, not the caller's output
-            reset()
-            init(arch, threads, default_fp=fp)
+            restart()
     _sims["open"] += 1
     _sims["built"] += 1
 
