@@ -230,6 +230,16 @@ def ended_without_result(run_dir: str, job, state: str) -> dict:
     return {"name": name, "run_dir": run_dir, "status": "failed", "error": f"{why} (log: {job.paths.stdout})"}
 
 
+def note_requeues(run_dir: str, noted: dict, progress) -> None:
+    """Report each time-limit stop of the run once, from its attempts record (slurm-attempts.jsonl) rather than from
+    squeue's states: a requeued job passes through COMPLETING and PENDING for seconds, which a look every poll_s
+    (10 s) can miss entirely."""
+    stops = sum(1 for a in read_attempts(run_dir) if a.get("event") == "end" and a.get("stopped_by_time_limit"))
+    if stops > noted.get(run_dir, 0):
+        noted[run_dir] = stops
+        progress.note(f"{Path(run_dir).name}: requeued (time limit); it resumes from its checkpoint")
+
+
 def execute(run_dirs: list[str], jobs: int, options: dict, progress) -> dict[str, dict]:
     """Run each folder's point as a task of a Slurm job array, at most `jobs` at once; wait for all, reporting to
     `progress`. Returns run_dir -> result (run_point's dict; status completed, failed or interrupted)."""
@@ -239,6 +249,7 @@ def execute(run_dirs: list[str], jobs: int, options: dict, progress) -> dict[str
     running = submit([str(d) for d in run_dirs], opts, jobs, progress)
     results: dict[str, dict] = {}
     seen: dict[str, str] = {}            # run_dir -> the last state squeue showed
+    noted: dict[str, int] = {}           # run_dir -> time-limit stops already reported
     missing_since: dict[str, float] = {}
     try:
         while running:
@@ -258,9 +269,8 @@ def execute(run_dirs: list[str], jobs: int, options: dict, progress) -> dict[str
                         elif seen.get(d) in ("PENDING", "REQUEUED"):
                             progress.note(f"{Path(d).name}: running again (restart {restarts(job.job_id)}), "
                                           "resuming from its checkpoint")
-                    elif st == "PENDING" and seen.get(d) == "RUNNING":
-                        progress.note(f"{Path(d).name}: requeued (time limit); it resumes from its checkpoint")
                     seen[d] = st
+                    note_requeues(d, noted, progress)
                     continue
                 else:                    # ended without a result, or not (or no longer) known to squeue
                     first = missing_since.setdefault(d, time.monotonic())
@@ -271,6 +281,8 @@ def execute(run_dirs: list[str], jobs: int, options: dict, progress) -> dict[str
                 del running[d]
                 if d not in progress.running:
                     progress.started(d)
+                if res.get("status") == "completed":
+                    note_requeues(d, noted, progress)   # stopped, requeued and finished between two looks
                 if res.get("status") == "interrupted" and res.get("error"):
                     progress.note(f"{Path(d).name}: {res['error']}")
                 progress.finished(d, res)
