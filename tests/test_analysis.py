@@ -14,6 +14,7 @@ from taichimyxo.analysis import (analyze, cell_clusters, connected_components, c
 from taichimyxo.cli import main as cli_main
 from taichimyxo.frame import Frame
 from taichimyxo.geometry import min_image
+from taichimyxo.analysis.tracking import confirmed
 
 V_B = 4.0
 
@@ -255,19 +256,24 @@ def test_curved_stream_is_no_aggregate():
     assert find_aggregates(half) == []
 
 
+def _stored_frame(z, k):
+    vel = z[k + "/particle_velocity"] if k + "/particle_velocity" in z else None
+    return Frame(time_s=float(z[k + "/time_s"]), step=0, box=tuple(z[k + "/box"].tolist()),
+                 width_um=float(z[k + "/width_um"]), positions=z[k + "/positions"].astype(float),
+                 engine_direction=z[k + "/engine_direction"], particle_speed=z[k + "/particle_speed"],
+                 particle_velocity=vel)
+
+
 def _labelled():
+    """(label dict, the labelled frame, its neighbouring frames of the same run where stored: 1 min before/after)."""
     here = os.path.join(os.path.dirname(__file__), "data")
     with open(os.path.join(here, "labelled_frames.json")) as f:
         lab = json.load(f)
     z = np.load(os.path.join(here, "labelled_frames.npz"))
     for fl in lab["frames"]:
         k = fl["key"]
-        vel = z[k + "/particle_velocity"] if k + "/particle_velocity" in z else None
-        fr = Frame(time_s=float(z[k + "/time_s"]), step=0, box=tuple(z[k + "/box"].tolist()),
-                   width_um=float(z[k + "/width_um"]), positions=z[k + "/positions"].astype(float),
-                   engine_direction=z[k + "/engine_direction"], particle_speed=z[k + "/particle_speed"],
-                   particle_velocity=vel)
-        yield fl, fr
+        nb = [_stored_frame(z, f"{k}/{w}") for w in ("prev", "next") if f"{k}/{w}/positions" in z]
+        yield fl, _stored_frame(z, k), nb
 
 
 def _agreement(fl, fr, aggs):
@@ -289,46 +295,52 @@ def _agreement(fl, fr, aggs):
 
 
 def _frame_agreement():
-    """Per labelled frame: (found, certain labels, extras, largest centre distance, count difference), the count
-    difference being detections not explained by an uncertain label minus the certain labels."""
+    """Per labelled frame: (found, certain labels, extras, largest centre distance, count difference, aggregates,
+    neighbouring frames stored), the count difference being detections not explained by an uncertain label minus the
+    certain labels. Where the neighbouring frames are stored, the aggregates are those confirmed by them as
+    `analyze` counts them (tracking.confirmed); elsewhere the single frame's."""
     out = {}
-    for fl, fr in _labelled():
+    for fl, fr, nb in _labelled():
         aggs = find_aggregates(fr, v_b=V_B)
+        if nb:
+            aggs = confirmed(aggs, [find_aggregates(f, v_b=V_B) for f in nb])
         hit, extra, dmax = _agreement(fl, fr, aggs)
-        out[fl["key"]] = (hit, len(fl["certain"]), extra, dmax, hit + extra - len(fl["certain"]), aggs)
+        out[fl["key"]] = (hit, len(fl["certain"]), extra, dmax, hit + extra - len(fl["certain"]), aggs, len(nb))
     return out
 
 
 def test_labelled_real_frames():
-    """Frames of S3 (active following), S2 (passive following), S4 (adhesion), S10 (spiral start) and S17 (slime
-    trails) whose aggregates were counted and outlined by eye (tests/data/labelled_frames.json, made without the
-    detector's output; there is no S13 run to label). Agreement as issue 13 asks: the count within one and every
-    aggregate a person is sure of found with its centre within 4 W = 2 µm (at most one of them missed; detections where
-    the person was unsure count for neither side).
+    """Frames of S3 (active following), S2 (passive following), S4 (adhesion), S10 (spiral start), S13 (dense,
+    aligned, active following) and S17 (slime trails) whose aggregates were counted and outlined by eye
+    (tests/data/labelled_frames.json, made without the detector's output). Agreement as issue 13 asks: the count
+    within one and every aggregate a person is sure of found with its centre within 4 W = 2 µm (at most one of them
+    missed; detections where the person was unsure count for neither side).
 
-    Strict on S3 32 min, S4 18 min, S10 3 min and S17 20 min. Known shortfalls, held to "no worse than now":
-    - S3 60 min: 21 of 23 found (count 21 vs 23): a small spiral of curled cells going both ways round (79.5, 19.5)
-      and a 4-5-cell curl (6, 31) are missed; every detection is a labelled aggregate.
+    Where the frames a minute before (and after) are stored, an aggregate counts only when it is seen there too, as
+    `analyze` counts them: that removes the transient curls inside S2's jammed clusters (5 -> 1 at 60 min) and S17's
+    (3 -> 0) and keeps all of S3's, S4's and S10's labelled aggregates.
+    Held to "no worse than now" on the three frames of the first runs, stored without neighbours (single frame):
     - S3 20 min (written before velocities were stored: speed x tangent): 8 of 10 found, 4 extra pieces of forming
       aggregates.
-    - S2 41 and 60 min (passive following, no aggregate): 3 and 4 small (< 20 cells) swirls inside jammed clusters
-      are found."""
+    - S2 41 min (passive following, no aggregate): 3 small (< 20 cells) swirls inside jammed clusters."""
     res = _frame_agreement()
-    print({k: v[:5] for k, v in res.items()})
-    for key in ("S3_t32", "S4_t18", "S10_t3", "S17_t20"):
-        hit, n, extra, dmax, dcount, _ = res[key]
+    print({k: v[:5] + v[6:] for k, v in res.items()})
+    strict = [k for k in res if k not in ("S3_t20", "S2_t41")]
+    assert {"S3_t32", "S3_t60", "S4_t18", "S10_t3", "S17_t20", "S2_t60"} <= set(strict)
+    for key in strict:
+        hit, n, extra, dmax, dcount, _, _ = res[key]
         assert abs(dcount) <= 1 and hit >= n - 1 and dmax <= 2.0, (key, res[key][:5])
-    hit, n, extra, dmax, dcount, _ = res["S3_t32"]
-    assert hit == n == 14
+    assert all(res[k][6] >= 1 for k in ("S3_t60", "S4_t18", "S10_t3", "S17_t20", "S2_t60"))
+    assert res["S3_t32"][:3] == (14, 14, 0)
     # the 12.5 um aggregate across the corner of S3 at 60 min is one aggregate, not rings or pieces
     big = [a for a in res["S3_t60"][5] if _pdist(a["centre_um"], (11.5, 99.5), (100.0, 100.0)) < 2.0]
     assert len(big) == 1 and big[0]["radius_um"] > 10.0
-    hit, n, extra, dmax, dcount, _ = res["S3_t60"]
-    assert hit >= 21 and n == 23 and extra == 0 and dmax <= 2.0
-    hit, n, extra, dmax, dcount, _ = res["S3_t20"]
+    hit, n, extra, dmax, dcount, _, _ = res["S3_t60"]
+    assert hit >= 22 and n == 23 and extra == 0
+    hit, n, extra, dmax, dcount, _, _ = res["S3_t20"]
     assert hit >= n - 2 and extra <= 4 and dmax <= 2.0
-    for key, most in (("S2_t41", 3), ("S2_t60", 4)):
-        hit, n, extra, dmax, dcount, aggs = res[key]
+    for key, most in (("S2_t41", 3), ("S2_t60", 1), ("S17_t20", 0)):
+        hit, n, extra, dmax, dcount, aggs, _ = res[key]
         assert n == 0 and extra <= most and all(a["n_cells"] < 20 for a in aggs), (key, res[key][:5])
 
 

@@ -28,7 +28,7 @@ particles' velocities (or speed x forward tangent where a trajectory stores none
    (``refine_iterations``); seeds of one sense whose centres come within ``merge_um`` (2 µm = 4 W), or within
    ``merge_fraction`` of the smaller one's radius, are merged (one aggregate found twice, e.g. its inner and outer
    rings).
-5. Accepted when: >= ``min_cells`` (5) cells; the member particles outside the core cover >= ``min_coverage`` (75 %)
+5. Accepted when: >= ``min_cells`` (4) cells; the member particles outside the core cover >= ``min_coverage`` (75 %)
    of 16 angular sectors around the centre (a curved stream or an arc covers less); the member particles circulate:
    the mean of sense x cos(angle between velocity and tangent) >= ``min_circulation`` (0.7) and the circulation R^2
    (the fraction of the velocity variance about the mean velocity carried by tangential motion about the centre,

@@ -5,7 +5,8 @@ import numpy as np
 
 DEFAULTS = dict(
     contact_tol_um=0.3,        # contact when particle distance < W + tol
-    min_cells=5,               # smallest aggregate (cells)
+    min_cells=4,               # smallest aggregate (cells): S3 at 60 min has a 4-5-cell curl a person counts
+    confirm_by_neighbours=True,  # an aggregate counts when it is also seen in the previous or next analysed frame
     max_radius_um=40.0,        # largest aggregate radius searched (clamped to 0.45 of the box)
     min_cell_speed_vb=0.1,     # a cell slower than this x v_b gives no rotation centre and circulates about none
     seed_radius_um=1.5,        # cells' own rotation centres this close count together (3 W)

@@ -27,7 +27,7 @@ from .cells import CellGeometry
 from .clusters import cell_clusters
 from .params import PAPER, R_BINS, fill_cell_defaults, parameters
 from .plots import write_plots
-from .tracking import lifetime_stats, link_tracks, public, size_regression, track_summaries
+from .tracking import confirmed, lifetime_stats, link_tracks, public, size_regression, track_summaries
 
 
 def json_clean(o):
@@ -55,6 +55,32 @@ def _size_bins(n: int) -> np.ndarray:
     return np.array(e)
 
 
+def _detected(frames: Iterable[Frame], v_b: float, P: dict):
+    """Per frame (CellGeometry, clusters, aggregates): the circulating groups find_aggregates finds that are also
+    seen in the previous or the next frame (tracking.confirmed; all of them with ``confirm_by_neighbours`` False).
+    Reads one frame ahead."""
+    prev = held = None
+    for fr in frames:
+        geo = CellGeometry(fr)
+        if held is None and prev is None:
+            fill_cell_defaults(P, geo)
+        cl = cell_clusters(geo.pos, geo.L, geo.W, P["contact_tol_um"])
+        cur = (geo, cl, find_aggregates(geo, cl, v_b=v_b, **P))
+        if held is not None:
+            yield _confirm(held, [x[2] for x in (prev, cur) if x is not None], P)
+            prev = held
+        held = cur
+    if held is not None:
+        yield _confirm(held, [prev[2]] if prev is not None else [], P)
+
+
+def _confirm(item, neighbours, P):
+    geo, cl, aggs = item
+    if P["confirm_by_neighbours"]:
+        aggs = confirmed(aggs, neighbours, P["link_overlap"], P["link_min_shared"])
+    return geo, cl, aggs
+
+
 def analyze_frames(frames: Iterable[Frame], v_b: float = 4.0, **params) -> dict:
     """Analyse an iterable of Frames (see the module docstring). Returns the summary dict (JSON-ready after
     json_clean); private keys starting with '_' carry data for the plots."""
@@ -78,15 +104,11 @@ def analyze_frames(frames: Iterable[Frame], v_b: float = 4.0, **params) -> dict:
     meta = None
     last_geo = None
     last_agg_frame = None
-    for fr in frames:
-        geo = CellGeometry(fr)
+    for geo, (lab, sizes, ci, cj), aggs in _detected(frames, v_b, P):
         if meta is None:
-            fill_cell_defaults(P, geo)
             meta = dict(n_cells=geo.n, particles_per_cell=geo.N, box_um=[float(geo.L[0]), float(geo.L[1])],
                         width_um=geo.W, cell_length_um=geo.cell_len)
             sbins = _size_bins(geo.n)
-        lab, sizes, ci, cj = cell_clusters(geo.pos, geo.L, geo.W, P["contact_tol_um"])
-        aggs = find_aggregates(geo, (lab, sizes, ci, cj), v_b=v_b, **P)
         # time series
         ts["time_min"].append(geo.t_min)
         ts["mean_speed_um_per_min"].append(float(geo.cspeed.mean()))
