@@ -1,0 +1,129 @@
+"""The accuracy study's outcome check (issue 15 item 5): does a larger step change what a user measures?
+
+    python -m taichimyxo sweep sweeps/accuracy.toml --jobs 2 --out sweeps-results/accuracy    # the runs (~1.5 h)
+    python benchmarks/accuracy_outcomes.py [sweeps-results/accuracy] [--out benchmarks/results]
+
+Trajectory errors of a few per cent are within the seed-to-seed spread of a chaotic many-cell system, so the
+trajectory tolerance of benchmarks/accuracy.py cannot say whether a step changes the *results*. This reads a sweep
+over a run setting (sweeps/accuracy.toml: half-scale S3, 1 simulated hour, 3 seeds per step), analyses every run's
+trajectory again with the installed analysis (so all runs are measured by the same code), and compares the outcomes
+of taichimyxo.sweep.collect (rotating aggregates, fraction of cells in them, mean edge speed, 95th-percentile speed,
+..., each averaged over the last quarter of the frames) of each setting with the reference setting's seeds.
+
+A setting **agrees** on an outcome when its seed mean lies within the reference's seed range (min..max); the table
+also gives the difference of the means in units of the reference's seed standard deviation. A setting may become a
+default only if it agrees on every outcome (ACCURACY.md). Also the cost: wall seconds per simulated hour of each run
+(the runs of a sweep run side by side, so compare costs within one sweep only).
+
+Writes accuracy_outcomes.csv (a row per run) and accuracy_outcomes.md (the comparison) into --out.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+CHECKED = ("n_aggregates", "fraction_in_aggregates", "edge_speed_vb", "speed_p95_vb", "aggregate_cells")
+
+
+def run_outcomes(run_dir: Path) -> dict | None:
+    """Outcomes of one finished run, from its trajectory analysed now (None when the run has not finished)."""
+    from taichimyxo.analysis import analyze
+    from taichimyxo.sweep import outcomes
+    from taichimyxo.sweep.rundir import read_json, read_result
+    res = read_result(run_dir)
+    if not res or res.get("status") != "completed":
+        return None
+    point = read_json(run_dir / "point.json")
+    gsd = run_dir / f"{point['name']}.gsd"
+    summary = analyze(str(gsd), out_dir=str(run_dir / "reanalysed"), plots=False)
+    row = dict(setting=json.dumps(point["overrides"], sort_keys=True), seed=point["seed"],
+               simulated_h=res["simulated_seconds"] / 3600.0, wall_s=res["wall_seconds"], steps=res["steps"])
+    row["wall_s_per_sim_h"] = row["wall_s"] / row["simulated_h"]
+    row.update({k: v for k, v in outcomes(summary).items() if k not in ("from_min", "to_min", "frames")})
+    return row
+
+
+def compare(rows: list[dict], reference: str) -> list[dict]:
+    """Per setting and outcome: seed mean, SD, values; reference range; agreement (mean within the range)."""
+    by: dict[str, list[dict]] = {}
+    for r in rows:
+        by.setdefault(r["setting"], []).append(r)
+    ref = by[reference]
+    out = []
+    for setting, rs in by.items():
+        for oc in CHECKED + ("wall_s_per_sim_h",):
+            vals = np.asarray([r[oc] for r in rs if r.get(oc) is not None], float)
+            rv = np.asarray([r[oc] for r in ref if r.get(oc) is not None], float)
+            m = float(vals.mean()) if len(vals) else math.nan
+            sd = float(vals.std(ddof=1)) if len(vals) > 1 else math.nan
+            rsd = float(rv.std(ddof=1)) if len(rv) > 1 else math.nan
+            lo, hi = (float(rv.min()), float(rv.max())) if len(rv) else (math.nan, math.nan)
+            cost = oc == "wall_s_per_sim_h"
+            out.append(dict(setting=setting, outcome=oc, seeds=len(vals), mean=m, sd=sd,
+                            values=[float(v) for v in vals], ref_min=lo, ref_max=hi,
+                            diff_in_ref_sd=(m - float(rv.mean())) / rsd if rsd and rsd > 0 else math.nan,
+                            agrees=None if cost else bool(lo <= m <= hi)))
+    return out
+
+
+def markdown(cmp: list[dict], reference: str) -> str:
+    lines = [f"Reference: {reference}. Agrees: the setting's seed mean within the reference's seed range.", "",
+             "| setting | outcome | mean ± SD (seeds) | per seed | reference range | Δ / SD_ref | agrees |",
+             "|---|---|---|---|---|---|---|"]
+    for c in cmp:
+        vals = ", ".join(f"{v:.3g}" for v in c["values"])
+        ag = "" if c["agrees"] is None else ("yes" if c["agrees"] else "**no**")
+        lines.append(f"| {c['setting']} | {c['outcome']} | {c['mean']:.3g} ± {c['sd']:.2g} ({c['seeds']}) | {vals} | "
+                     f"{c['ref_min']:.3g}–{c['ref_max']:.3g} | {c['diff_in_ref_sd']:+.2f} | {ag} |")
+    settings = list(dict.fromkeys(c["setting"] for c in cmp))
+    lines.append("")
+    for s in settings:
+        if s == reference:
+            continue
+        bad = [c["outcome"] for c in cmp if c["setting"] == s and c["agrees"] is False]
+        lines.append(f"- {s}: " + ("agrees with the reference on every outcome" if not bad else
+                                    "outside the reference's seed range on " + ", ".join(bad)))
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("sweep_out", nargs="?", default="sweeps-results/accuracy")
+    ap.add_argument("--reference", default=None, help='the reference setting as JSON (default: the smallest '
+                    'first swept value, e.g. {"run.dt_ms": 2})')
+    ap.add_argument("--out", default="benchmarks/results")
+    a = ap.parse_args(argv)
+    root = Path(a.sweep_out)
+    dirs = sorted((root / "runs").glob("*/"))
+    if not dirs:
+        print(f"accuracy_outcomes: no run folders in {root / 'runs'}")
+        return 2
+    rows = [r for r in (run_outcomes(d) for d in dirs) if r is not None]
+    if not rows:
+        print(f"accuracy_outcomes: no finished run in {root / 'runs'}")
+        return 2
+    settings = sorted({r["setting"] for r in rows}, key=lambda s: [v for v in json.loads(s).values()])
+    reference = json.dumps(json.loads(a.reference), sort_keys=True) if a.reference else settings[0]
+    if reference not in settings:
+        print(f"accuracy_outcomes: reference {reference} has no finished run (settings: {', '.join(settings)})")
+        return 2
+    out = Path(a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    with open(out / "accuracy_outcomes.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    cmp = compare(rows, reference)
+    md = markdown(cmp, reference)
+    (out / "accuracy_outcomes.md").write_text(md)
+    print(md)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
