@@ -318,7 +318,9 @@ def test_labelled_real_frames():
 
     Where the frames a minute before (and after) are stored, an aggregate counts only when it is seen there too, as
     `analyze` counts them: that removes the transient curls inside S2's jammed clusters (5 -> 1 at 60 min) and S17's
-    (3 -> 0) and keeps all of S3's, S4's and S10's labelled aggregates.
+    (3 -> 0) and keeps all of S3's, S4's and S10's labelled aggregates. S13 at 17 min (dense swirling streams):
+    1 of the 2 sure aggregates found (the other is found in that frame alone, not in the frames a minute before and
+    after), 1 on an unsure label, 1 unlabelled (count difference 0).
     Held to "no worse than now" on the three frames of the first runs, stored without neighbours (single frame):
     - S3 20 min (written before velocities were stored: speed x tangent): 8 of 10 found, 4 extra pieces of forming
       aggregates.
@@ -326,11 +328,11 @@ def test_labelled_real_frames():
     res = _frame_agreement()
     print({k: v[:5] + v[6:] for k, v in res.items()})
     strict = [k for k in res if k not in ("S3_t20", "S2_t41")]
-    assert {"S3_t32", "S3_t60", "S4_t18", "S10_t3", "S17_t20", "S2_t60"} <= set(strict)
+    assert {"S3_t32", "S3_t60", "S4_t18", "S10_t3", "S13_t17", "S17_t20", "S2_t60"} <= set(strict)
     for key in strict:
         hit, n, extra, dmax, dcount, _, _ = res[key]
         assert abs(dcount) <= 1 and hit >= n - 1 and dmax <= 2.0, (key, res[key][:5])
-    assert all(res[k][6] >= 1 for k in ("S3_t60", "S4_t18", "S10_t3", "S17_t20", "S2_t60"))
+    assert all(res[k][6] >= 1 for k in ("S3_t60", "S4_t18", "S10_t3", "S13_t17", "S17_t20", "S2_t60"))
     assert res["S3_t32"][:3] == (14, 14, 0)
     # the 12.5 um aggregate across the corner of S3 at 60 min is one aggregate, not rings or pieces
     big = [a for a in res["S3_t60"][5] if _pdist(a["centre_um"], (11.5, 99.5), (100.0, 100.0)) < 2.0]
