@@ -1,6 +1,7 @@
 """Stability sweep (issue 5): the largest stable time step per integrator over the paper's stiffness grid.
 
     python benchmarks/stability_sweep.py [--quick] [--out DIR]
+    python benchmarks/stability_sweep.py --sparse [--out DIR]    # explicit: sparse start against the dense jam
 
 Writes stability.csv, stability.md and stability_limits.json into the output folder (default benchmarks-results/ in
 the current directory). The limits the program enforces are package data, taichimyxo/stability_limits.json, which a
@@ -33,7 +34,14 @@ K_C = (0.01, 0.002)
 ACCURATE_DT_MS = {"explicit": 2.0, "imex": 1.0}
 
 
-def _stab_scene(method: Method, k_a: float, k_c: float):
+def _stab_scene(method: Method, k_a: float, k_c: float, config: str = "dense"):
+    if config == "sparse":
+        # what a step-size controller would exploit: the paper's low-density random start (S1, 80 cells in a
+        # 40 x 40 µm box) where few cells touch; the limit here is the cell's own springs and bending
+        return scene_for({"domain": {"width_um": 40.0, "height_um": 40.0},
+                          "population": {"start": "random", "density_cells_per_cm2": 5e6},
+                          "cell": {"k_a_N_m": k_a}, "collisions": {"k_c_N_per_m": k_c},
+                          "guiding": {"kind": "active"}, "run": {"seed": 3}}, method)
     return scene_for({"domain": {"width_um": 15.0, "height_um": 15.0},
                       "population": {"start": "aligned", "density_cells_per_cm2": 4e7},
                       "cell": {"k_a_N_m": k_a}, "collisions": {"k_c_N_per_m": k_c},
@@ -48,7 +56,8 @@ def _max_speed_vb(before: np.ndarray, after: np.ndarray, box, seconds: float, v_
     return float(np.sqrt((d * d).sum(-1)).max() / seconds / v_b)
 
 
-def stability_worker(integrator: str, contacts: str, k_a: float, k_c: float, dts: list[float], n_steps: int) -> dict:
+def stability_worker(integrator: str, contacts: str, k_a: float, k_c: float, dts: list[float], n_steps: int,
+                     config: str = "dense") -> dict:
     """Hard configuration: a high-density aligned patch with random polarities and active following (cells jam,
     push and bend), relaxed first with the explicit step at 0.5 ms for 5 s. From that state, each step size runs
     `n_steps` steps (at least 10 s simulated); stable = finite, segment lengths within +-20 % of l0, no particle faster
@@ -59,7 +68,7 @@ def stability_worker(integrator: str, contacts: str, k_a: float, k_c: float, dts
     from taichimyxo.invariants import Bounds, measure
     backend.init("cpu", 1, default_fp="f32")
     relax = Method("explicit", dt_ms=0.5, precision="mixed")
-    sc0 = _stab_scene(relax, k_a, k_c)
+    sc0 = _stab_scene(relax, k_a, k_c, config)
     pos, ke0 = initial_configuration(sc0)       # no reversals here: the engine directions stay as they start
     prep = make(sc0, relax, pos, ke0)
     prep.run(steps(5.0, 0.5))
@@ -82,7 +91,7 @@ def stability_worker(integrator: str, contacts: str, k_a: float, k_c: float, dts
             out[str(dt)] = {"stable": False, "why": "not run (two smaller steps failed)"}
             continue
         m = Method(integrator, contacts, dt_ms=dt, precision="mixed")
-        sc = _stab_scene(m, k_a, k_c)
+        sc = _stab_scene(m, k_a, k_c, config)
         # one compiled simulation per (k_a, k_c): the step size only enters through run's dt
         if sim is None:
             sim = make(sc, m, pos0, ke0)
@@ -113,9 +122,10 @@ def stability_worker(integrator: str, contacts: str, k_a: float, k_c: float, dts
     return out
 
 
-def _spawn(integrator, contacts, k_a, k_c, dts, n_steps) -> dict:
+def _spawn(integrator, contacts, k_a, k_c, dts, n_steps, config="dense") -> dict:
     cmd = [sys.executable, __file__, "--worker", json.dumps({"integrator": integrator, "contacts": contacts,
-                                                             "k_a": k_a, "k_c": k_c, "dts": dts, "n_steps": n_steps})]
+                                                             "k_a": k_a, "k_c": k_c, "dts": dts, "n_steps": n_steps,
+                                                             "config": config})]
     r = json_from_worker(cmd, timeout=3600)
     if "error" in r:
         return {str(d): {"stable": False, "why": f"worker failed: {r['error'][:80]}"} for d in dts}
@@ -211,9 +221,43 @@ def main(quick: bool = False, out_dir: str = DEFAULT_OUT) -> int:
     return 0
 
 
+def sparse_main(out_dir: str = DEFAULT_OUT) -> int:
+    """--sparse: the explicit step's limit in the sparse start against the dense jam, at the paper's low-density
+    contact stiffness, for the four bending stiffnesses: how much larger a step a step-size controller could take
+    while the system is sparse (issue 15 item 4). Writes stability_sparse.{csv,md}; never the limits."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    dts = [d for d in STAB_DT_MS if d <= 30.0]
+    jobs = [("explicit", "coupled", ka, 0.01, dts, 400, cfg) for ka in K_A for cfg in ("sparse", "dense")]
+    with ThreadPoolExecutor(2) as ex:
+        results = list(ex.map(lambda j: _spawn(*j), jobs))
+    rows = []
+    for (_, _, ka, kc, _, _, cfg), res in zip(jobs, results):
+        dts_run = sorted((k for k in res if k[0].isdigit()), key=float)
+        first_bad = next((f"{float(d):g} ms: {res[d]['why']}" for d in dts_run if not res[d]["stable"]), "")
+        rows.append({"config": cfg, "k_a_N_m": ka, "k_c_N_per_m": kc, "limit_ms": _limit(res),
+                     "first_unstable": first_bad})
+    write_csv(out / "stability_sparse.csv", rows)
+    lim = {(r["config"], r["k_a_N_m"]): r for r in rows}
+    lines = ["# Explicit step limit: sparse start against dense jam (ms)", "",
+             f"`python benchmarks/stability_sweep.py --sparse` ({(time.perf_counter() - t0) / 60:.1f} min). Sparse: "
+             "the S1 start (40 x 40 µm, 80 cells at 5e6 cells/cm², random), dense: the 15 x 15 µm jam of "
+             "stability.md; both with active following and k_c = 0.01 N/m, relaxed 5 s, the same stability tests.", "",
+             "| k_a (N·m) | sparse | dense | first failure, sparse | first failure, dense |", "|---|---|---|---|---|"]
+    for ka in K_A:
+        sp, de = lim[("sparse", ka)], lim[("dense", ka)]
+        lines.append(f"| {ka:g} | {sp['limit_ms']:g} | {de['limit_ms']:g} | {sp['first_unstable']} | "
+                     f"{de['first_unstable']} |")
+    (out / "stability_sparse.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = parser(__doc__, "reduced version: 2 stiffnesses, 200 steps per step size")
     p.add_argument("--worker", help=argparse.SUPPRESS)       # JSON: one (integrator, k_a, k_c) in this process
+    p.add_argument("--sparse", action="store_true", help="the explicit limit in a sparse start against the dense jam")
     return p
 
 
@@ -222,4 +266,4 @@ if __name__ == "__main__":
     if a.worker:
         print(json.dumps(stability_worker(**json.loads(a.worker))))
         raise SystemExit(0)
-    raise SystemExit(main(quick=a.quick, out_dir=a.out))
+    raise SystemExit(sparse_main(a.out) if a.sparse else main(quick=a.quick, out_dir=a.out))

@@ -316,15 +316,16 @@ def test_labelled_real_frames():
     within one and every aggregate a person is sure of found with its centre within 4 W = 2 µm (at most one of them
     missed; detections where the person was unsure count for neither side).
 
-    Where the frames a minute before (and after) are stored, an aggregate counts only when it is seen there too, as
-    `analyze` counts them: that removes the transient curls inside S2's jammed clusters (5 -> 1 at 60 min) and S17's
-    (3 -> 0) and keeps all of S3's, S4's and S10's labelled aggregates. S13 at 17 min (dense swirling streams):
-    1 of the 2 sure aggregates found (the other is found in that frame alone, not in the frames a minute before and
-    after), 1 on an unsure label, 1 unlabelled (count difference 0).
-    Held to "no worse than now" on the three frames of the first runs, stored without neighbours (single frame):
-    - S3 20 min (written before velocities were stored: speed x tangent): 8 of 10 found, 4 extra pieces of forming
-      aggregates.
-    - S2 41 min (passive following, no aggregate): 3 small (< 20 cells) swirls inside jammed clusters."""
+    Every labelled frame is stored with the frames a minute before and after (the last frame of a run: before
+    only), and an aggregate counts only when it is seen in one of them too, as `analyze` counts them: that removes
+    most transient curls inside S2's jammed clusters (41 min: 3 -> 2, 60 min: 5 -> 1) and all of S17's (3 -> 0),
+    and finds 52 of the 57 aggregates a person is sure of over the nine frames. S13 at 17 min (dense swirling
+    streams): 1 of the 2 sure aggregates found (the other is found in that frame alone), 1 on an unsure label, 1
+    unlabelled. Strict on 7 of the 9 frames; held to "no worse than now" on two:
+    - S3 20 min (the frame has no velocities: speed x tangent): 8 of 10 found, 4 extra pieces of forming
+      aggregates (count +2).
+    - S2 41 min (passive following, no aggregate): 2 small (< 20 cells) swirls inside jammed clusters that last
+      a minute (count +2)."""
     res = _frame_agreement()
     print({k: v[:5] + v[6:] for k, v in res.items()})
     strict = [k for k in res if k not in ("S3_t20", "S2_t41")]
@@ -332,8 +333,8 @@ def test_labelled_real_frames():
     for key in strict:
         hit, n, extra, dmax, dcount, _, _ = res[key]
         assert abs(dcount) <= 1 and hit >= n - 1 and dmax <= 2.0, (key, res[key][:5])
-    assert all(res[k][6] >= 1 for k in ("S3_t60", "S4_t18", "S10_t3", "S13_t17", "S17_t20", "S2_t60"))
-    assert res["S3_t32"][:3] == (14, 14, 0)
+    assert all(v[6] >= 1 for v in res.values())
+    assert sum(v[0] for v in res.values()) >= 52 and sum(v[1] for v in res.values()) == 57
     # the 12.5 um aggregate across the corner of S3 at 60 min is one aggregate, not rings or pieces
     big = [a for a in res["S3_t60"][5] if _pdist(a["centre_um"], (11.5, 99.5), (100.0, 100.0)) < 2.0]
     assert len(big) == 1 and big[0]["radius_um"] > 10.0
@@ -341,7 +342,7 @@ def test_labelled_real_frames():
     assert hit >= 22 and n == 23 and extra == 0
     hit, n, extra, dmax, dcount, _, _ = res["S3_t20"]
     assert hit >= n - 2 and extra <= 4 and dmax <= 2.0
-    for key, most in (("S2_t41", 3), ("S2_t60", 1), ("S17_t20", 0)):
+    for key, most in (("S2_t41", 2), ("S2_t60", 1), ("S17_t20", 0)):
         hit, n, extra, dmax, dcount, aggs, _ = res[key]
         assert n == 0 and extra <= most and all(a["n_cells"] < 20 for a in aggs), (key, res[key][:5])
 
