@@ -11,7 +11,9 @@ of taichimyxo.sweep.collect (rotating aggregates, fraction of cells in them, mea
 ..., each averaged over the last quarter of the frames) of each setting with the reference setting's seeds.
 
 A setting **agrees** on an outcome when its seed mean lies within the reference's seed range (min..max); the table
-also gives the difference of the means in units of the reference's seed standard deviation. A setting may become a
+also gives the difference of the means in units of the reference's seed standard deviation and Welch's t (the
+difference over the standard error of the difference of two means; with 3 seeds a side a range can be narrow by
+chance, so read both). A setting may become a
 default only if it agrees on every outcome (ACCURACY.md). Also the cost: wall seconds per simulated hour of each run
 (the runs of a sweep run side by side, so compare costs within one sweep only).
 
@@ -64,22 +66,25 @@ def compare(rows: list[dict], reference: str) -> list[dict]:
             rsd = float(rv.std(ddof=1)) if len(rv) > 1 else math.nan
             lo, hi = (float(rv.min()), float(rv.max())) if len(rv) else (math.nan, math.nan)
             cost = oc == "wall_s_per_sim_h"
+            se = math.sqrt(rsd ** 2 / len(rv) + sd ** 2 / len(vals)) if len(rv) > 1 and len(vals) > 1 else math.nan
             out.append(dict(setting=setting, outcome=oc, seeds=len(vals), mean=m, sd=sd,
                             values=[float(v) for v in vals], ref_min=lo, ref_max=hi,
                             diff_in_ref_sd=(m - float(rv.mean())) / rsd if rsd and rsd > 0 else math.nan,
+                            welch_t=(m - float(rv.mean())) / se if se and se > 0 else math.nan,
                             agrees=None if cost else bool(lo <= m <= hi)))
     return out
 
 
 def markdown(cmp: list[dict], reference: str) -> str:
-    lines = [f"Reference: {reference}. Agrees: the setting's seed mean within the reference's seed range.", "",
-             "| setting | outcome | mean ± SD (seeds) | per seed | reference range | Δ / SD_ref | agrees |",
-             "|---|---|---|---|---|---|---|"]
+    lines = [f"Reference: {reference}. Agrees: the setting's seed mean within the reference's seed range. Welch t: "
+             "difference of the means / its standard error.", "",
+             "| setting | outcome | mean ± SD (seeds) | per seed | reference range | Δ / SD_ref | Welch t | agrees |",
+             "|---|---|---|---|---|---|---|---|"]
     for c in cmp:
         vals = ", ".join(f"{v:.3g}" for v in c["values"])
         ag = "" if c["agrees"] is None else ("yes" if c["agrees"] else "**no**")
         lines.append(f"| {c['setting']} | {c['outcome']} | {c['mean']:.3g} ± {c['sd']:.2g} ({c['seeds']}) | {vals} | "
-                     f"{c['ref_min']:.3g}–{c['ref_max']:.3g} | {c['diff_in_ref_sd']:+.2f} | {ag} |")
+                     f"{c['ref_min']:.3g}–{c['ref_max']:.3g} | {c['diff_in_ref_sd']:+.2f} | {c['welch_t']:+.2f} | {ag} |")
     settings = list(dict.fromkeys(c["setting"] for c in cmp))
     lines.append("")
     for s in settings:
