@@ -1,7 +1,7 @@
 """The accuracy study's outcome check (issue 15 item 5): does a larger step change what a user measures?
 
     python -m taichimyxo sweep sweeps/accuracy.toml --jobs 2 --out sweeps-results/accuracy    # the runs (~1.5 h)
-    python benchmarks/accuracy_outcomes.py [sweeps-results/accuracy] [--out benchmarks/results]
+    python benchmarks/accuracy_outcomes.py [sweeps-results/accuracy] [--out DIR]   # default DIR: benchmarks-results
 
 Trajectory errors of a few per cent are within the seed-to-seed spread of a chaotic many-cell system, so the
 trajectory tolerance of benchmarks/accuracy.py cannot say whether a step changes the *results*. This reads a sweep
@@ -17,7 +17,8 @@ chance, so read both). A setting may become a
 default only if it agrees on every outcome (ACCURACY.md). Also the cost: wall seconds per simulated hour of each run
 (the runs of a sweep run side by side, so compare costs within one sweep only).
 
-Writes accuracy_outcomes.csv (a row per run) and accuracy_outcomes.md (the comparison) into --out.
+Writes accuracy_outcomes.csv (a row per run) and accuracy_outcomes.md (the comparison) into --out (default
+benchmarks-results/ in the current directory, like every benchmark; the committed ones are benchmarks/results/).
 """
 from __future__ import annotations
 
@@ -101,7 +102,7 @@ def main(argv=None) -> int:
     ap.add_argument("sweep_out", nargs="?", default="sweeps-results/accuracy")
     ap.add_argument("--reference", default=None, help='the reference setting as JSON (default: the smallest '
                     'first swept value, e.g. {"run.dt_ms": 2})')
-    ap.add_argument("--out", default="benchmarks/results")
+    ap.add_argument("--out", default="benchmarks-results")
     a = ap.parse_args(argv)
     root = Path(a.sweep_out)
     dirs = sorted((root / "runs").glob("*/"))
