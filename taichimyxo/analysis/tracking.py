@@ -43,9 +43,10 @@ def _shared(a: np.ndarray, b: np.ndarray) -> int:
     return int(len(np.intersect1d(a, b, assume_unique=True)))
 
 
-def _linked(a: np.ndarray, b: np.ndarray, link_overlap: float, link_min_shared: int) -> bool:
+def _link(a: np.ndarray, b: np.ndarray, link_overlap: float, link_min_shared: int) -> int:
+    """The cells two aggregates share when that makes a link (module docstring), else 0."""
     s = _shared(a, b)
-    return s >= link_min_shared and s >= link_overlap * min(len(a), len(b))
+    return s if s >= link_min_shared and s >= link_overlap * min(len(a), len(b)) else 0
 
 
 def confirmed(aggs: list[dict], neighbours: list[list[dict]], link_overlap: float = 0.3,
@@ -61,7 +62,7 @@ def confirmed(aggs: list[dict], neighbours: list[list[dict]], link_overlap: floa
     if not neighbours:
         return list(aggs)
     others = [b["_members"] for fa in neighbours for b in fa]
-    return [a for a in aggs if any(_linked(a["_members"], b, link_overlap, link_min_shared) for b in others)]
+    return [a for a in aggs if any(_link(a["_members"], b, link_overlap, link_min_shared) for b in others)]
 
 
 def link_tracks(per_frame: list[list[dict]], times: list[float] | None = None, max_gap: int = 2,
@@ -97,8 +98,8 @@ def link_tracks(per_frame: list[list[dict]], times: list[float] | None = None, m
             lf, _ = tracks[tid]["frames"][-1]
             mt = tracks[tid]["_members"]
             for ai, ma in enumerate(members[fi]):
-                k = _shared(mt, ma)
-                if k >= link_min_shared and k >= link_overlap * min(len(mt), len(ma)):
+                k = _link(mt, ma, link_overlap, link_min_shared)
+                if k:
                     links.append((k, tid, ai))
         # the older track first (when two merge, the elder continues: a one-frame split of an aggregate into two
         # pieces and back keeps its identity), then its largest overlap
