@@ -14,7 +14,8 @@ from taichimyxo.analysis import (analyze, cell_clusters, connected_components, c
 from taichimyxo.cli import main as cli_main
 from taichimyxo.frame import Frame
 from taichimyxo.geometry import min_image
-from taichimyxo.analysis.tracking import confirmed
+from taichimyxo.analysis.params import parameters
+from taichimyxo.analysis.summary import detected_aggregates
 
 V_B = 4.0
 
@@ -297,13 +298,13 @@ def _agreement(fl, fr, aggs):
 def _frame_agreement():
     """Per labelled frame: (found, certain labels, extras, largest centre distance, count difference, aggregates,
     neighbouring frames stored), the count difference being detections not explained by an uncertain label minus the
-    certain labels. Where the neighbouring frames are stored, the aggregates are those confirmed by them as
-    `analyze` counts them (tracking.confirmed); elsewhere the single frame's."""
+    certain labels. The aggregates are those `analyze` counts in the labelled frame, its frames passed through the
+    same detection (summary.detected_aggregates: confirmed by a neighbouring frame)."""
     out = {}
     for fl, fr, nb in _labelled():
-        aggs = find_aggregates(fr, v_b=V_B)
-        if nb:
-            aggs = confirmed(aggs, [find_aggregates(f, v_b=V_B) for f in nb])
+        seq = sorted(nb + [fr], key=lambda f: f.time_s)
+        at = next(i for i, f in enumerate(seq) if f is fr)
+        aggs = list(detected_aggregates(seq, V_B, parameters()))[at][2]
         hit, extra, dmax = _agreement(fl, fr, aggs)
         out[fl["key"]] = (hit, len(fl["certain"]), extra, dmax, hit + extra - len(fl["certain"]), aggs, len(nb))
     return out

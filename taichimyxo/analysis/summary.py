@@ -55,7 +55,7 @@ def _size_bins(n: int) -> np.ndarray:
     return np.array(e)
 
 
-def _detected(frames: Iterable[Frame], v_b: float, P: dict):
+def detected_aggregates(frames: Iterable[Frame], v_b: float, P: dict):
     """Per frame (CellGeometry, clusters, aggregates): the circulating groups find_aggregates finds that are also
     seen in the previous or the next frame (tracking.confirmed; all of them with ``confirm_by_neighbours`` False).
     Reads one frame ahead."""
@@ -104,7 +104,7 @@ def analyze_frames(frames: Iterable[Frame], v_b: float = 4.0, **params) -> dict:
     meta = None
     last_geo = None
     last_agg_frame = None
-    for geo, (lab, sizes, ci, cj), aggs in _detected(frames, v_b, P):
+    for geo, (lab, sizes, ci, cj), aggs in detected_aggregates(frames, v_b, P):
         if meta is None:
             meta = dict(n_cells=geo.n, particles_per_cell=geo.N, box_um=[float(geo.L[0]), float(geo.L[1])],
                         width_um=geo.W, cell_length_um=geo.cell_len)
