@@ -26,6 +26,7 @@ import argparse
 import csv
 import json
 import math
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -43,7 +44,8 @@ def run_outcomes(run_dir: Path) -> dict | None:
         return None
     point = read_json(run_dir / "point.json")
     gsd = run_dir / f"{point['name']}.gsd"
-    summary = analyze(str(gsd), out_dir=str(run_dir / "reanalysed"), plots=False)
+    with tempfile.TemporaryDirectory() as tmp:            # the summary is all we need; leave the run folder as is
+        summary = analyze(str(gsd), out_dir=tmp, plots=False)
     row = dict(setting=json.dumps(point["overrides"], sort_keys=True), seed=point["seed"],
                simulated_h=res["simulated_seconds"] / 3600.0, wall_s=res["wall_seconds"], steps=res["steps"])
     row["wall_s_per_sim_h"] = row["wall_s"] / row["simulated_h"]
