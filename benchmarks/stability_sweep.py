@@ -142,6 +142,12 @@ def _limit(res: dict) -> float:
     return lim
 
 
+def _tested(res: dict) -> tuple[list[str], str]:
+    """The step sizes a worker ran (ms, as its keys, ascending) and its first failure ("" when none failed)."""
+    dts_run = sorted((k for k in res if k[0].isdigit()), key=float)
+    return dts_run, next((f"{float(d):g} ms: {res[d]['why']}" for d in dts_run if not res[d]["stable"]), "")
+
+
 def default_steps(limits: dict) -> dict:
     out = {}
     for integ, acc in ACCURATE_DT_MS.items():
@@ -185,8 +191,7 @@ def main(quick: bool = False, out_dir: str = DEFAULT_OUT) -> int:
     for (i, c, ka, kc, dts, _), res in zip(jobs, results):
         name = i if (i == "explicit" or c == "coupled") else f"imex-{c}"
         lim = _limit(res)
-        dts_run = sorted((k for k in res if k[0].isdigit()), key=float)
-        first_bad = next((f"{float(d):g} ms: {res[d]['why']}" for d in dts_run if not res[d]["stable"]), "")
+        dts_run, first_bad = _tested(res)
         table.setdefault(name, {})[f"{ka:g}/{kc:g}"] = lim
         rows.append({"integrator": name, "k_a_N_m": ka, "k_c_N_per_m": kc, "limit_ms": lim,
                      "first_unstable": first_bad, "speed_bound_vb": round(res.get("v_bound", float("nan")), 2),
@@ -234,8 +239,7 @@ def sparse_main(out_dir: str = DEFAULT_OUT) -> int:
         results = list(ex.map(lambda j: _spawn(*j), jobs))
     rows = []
     for (_, _, ka, kc, _, _, cfg), res in zip(jobs, results):
-        dts_run = sorted((k for k in res if k[0].isdigit()), key=float)
-        first_bad = next((f"{float(d):g} ms: {res[d]['why']}" for d in dts_run if not res[d]["stable"]), "")
+        first_bad = _tested(res)[1]
         rows.append({"config": cfg, "k_a_N_m": ka, "k_c_N_per_m": kc, "limit_ms": _limit(res),
                      "first_unstable": first_bad})
     write_csv(out / "stability_sparse.csv", rows)
