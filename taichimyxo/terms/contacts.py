@@ -270,11 +270,17 @@ class Contacts:
                         # the segments' own distance first (the numbers of NeighbourList.seg_distance: t's second end
                         # chained from its first, so a far pair cannot pass by mapping t's ends to different images):
                         # no sample of one is nearer the other than that, and most listed pairs (within W + skin) do not
-                        # touch (margin far above rounding: a borderline pair is evaluated in full, the samples decide)
+                        # touch. No margin: segments W or more apart exert no force. Where rounding puts a sample's
+                        # own distance below W while the segments' is not, the overlap is rounding (~1e-7 µm, a force
+                        # below 1e-3 pN) and the whole pair is skipped, so action and reaction stay equal. Measured:
+                        # S11's aligned start is a lattice at exactly W (18 700 of the 19 700 pairs within 1.001 W
+                        # are exactly W apart); with a 1e-3 margin each was evaluated in full, 85 000 sample tests a
+                        # step for 2 000 within W. Without it the forces there are bit for bit the same, positions
+                        # after 3000 steps within 2e-6 µm, and the step costs 12.3 M instructions instead of 22.1 M.
                         At = self.rel(xt_a, xs_a)
                         Bt = self.rel(xt_b, xt_a)                 # t's second point in t's own frame
                         _, _, c1, c2 = closest_points(zero, Bs, At, At + Bt)
-                        if (c2 - c1).norm() < W * (1.0 + 1e-3):
+                        if (c2 - c1).norm() < W:
                             # every point computed once, in each sample's own frame (chain_points' numbers exactly):
                             # s's samples against t's chain in s's frame, t's samples against s's chain in t's frame
                             Ts = [At, self.rel(xt_b, xs_a), self.rel(xt_p, xs_a), self.rel(xt_n, xs_a)]
