@@ -69,36 +69,31 @@ class Contacts:
     # ------------------------------------------------------------------ the law, in a pair's local frame
     @ti.func
     def chain_points(self, t, o):
-        """Segment t and its chain neighbours relative to o, in force precision: (A, B) its first and second
-        particle, Ap the particle before A (A itself at the cell's first end), Bn the one after B (B at the last).
-        Each point is computed directly from its own position and o, so a particle shared by t and t + 1 has the
-        same numbers whichever segment is asked: the nearest-segment rule compares identical distances, and a sample
-        nearest to a node counts exactly once (measured: offsets chained from A lost a quarter of the force of two
-        cells side by side at 3e-5 rad in mixed precision)."""
+        """Segment t and its chain neighbours relative to o, in force precision: (A, B) its particles, Ap the one before
+        A (A at the cell's first end), Bn the one after B (B at the last). Each point directly from its own position
+        and o, so a particle shared by t and t + 1 has the same numbers whichever segment asks and a sample nearest to
+        a node counts once (offsets chained from A lost a quarter of the force of two cells side by side at 3e-5 rad
+        in mixed precision)."""
         xp, xa, xb, xn = self.chain_positions(t)
         return self.rel(xa, o), self.rel(xb, o), self.rel(xp, o), self.rel(xn, o)
 
     @ti.func
     def chain_positions(self, t):
-        """Positions of segment t's chain points: the particle before its first (the first itself at the cell's
-        first end), its two particles, the one after (the second itself at the last end)."""
+        """Positions of segment t's chain points (Ap, A, B, Bn of chain_points)."""
         st = self.state
-        N = ti.static(self.N)
         a, b = st.seg_ends(t)
-        kt = t % (N - 1)
-        pa = a
-        pb = b
+        kt = t % ti.static(self.N - 1)
+        pa, pb = a, b
         if kt > 0:
             pa = a - 1
-        if kt < N - 2:
+        if kt < ti.static(self.N - 2):
             pb = b + 1
         return st.x[pa], st.x[a], st.x[b], st.x[pb]
 
     @ti.func
     def rel(self, y, o):
         """y relative to o (minimum image), in force precision: the one formula every chain point is computed by."""
-        st = self.state
-        return ti.cast(st.mi(y - o), st.fdt)
+        return ti.cast(self.state.mi(y - o), self.state.fdt)
 
     @ti.func
     def sample_eligible(self, c, h, t):
@@ -222,10 +217,8 @@ class Contacts:
 
     @ti.func
     def sample_frame(self, p_seg, o_seg):
-        """Chain points of p_seg (whose samples are tested) and of o_seg, both relative to p_seg's first particle:
-        every distance of one sample is computed in that sample's frame."""
-        a, _ = self.state.seg_ends(p_seg)
-        o = self.state.x[a]
+        """Chain points of p_seg (whose samples are tested) and of o_seg, relative to p_seg's first particle."""
+        o = self.state.x[self.state.seg_ends(p_seg)[0]]
         Ap, Bp, App, Bnp = self.chain_points(p_seg, o)
         Ao, Bo, Apo, Bno = self.chain_points(o_seg, o)
         return [Ap, Bp, App, Bnp], [Ao, Bo, Apo, Bno]
@@ -251,14 +244,9 @@ class Contacts:
         else:
             st = self.state
             nl = self.nl
-            W = ti.static(self.W)
             n = nl.nbr_n[s]
             if n > 0:                        # most segments of a sparse state have no partner: load nothing for them
-                # s's chain positions, loaded once for all its pairs, and every point computed once per pair (the
-                # former sample_frame per side loaded and mapped each again): S11's dense state, counted with
-                # callgrind (one thread, the same positions), 22.9 -> 17.7 M instructions per pair loop, the step
-                # 27.1 -> 22.1 M, forces bit for bit the same. s's own points in its frame: A = 0 exactly, as
-                # chain_points gives
+                # positions loaded and points mapped once per pair (S11: 27.1 -> 22.1 M instructions a step, callgrind)
                 xs_p, xs_a, xs_b, xs_n = self.chain_positions(s)
                 zero = ti.Vector([0.0, 0.0], dt=st.fdt)
                 Bs = self.rel(xs_b, xs_a)
@@ -267,27 +255,19 @@ class Contacts:
                     if t > s:
                         v = ti.Vector.zero(st.fdt, 8)
                         xt_p, xt_a, xt_b, xt_n = self.chain_positions(t)
-                        # the segments' own distance first (the numbers of NeighbourList.seg_distance: t's second end
-                        # chained from its first, so a far pair cannot pass by mapping t's ends to different images):
-                        # no sample of one is nearer the other than that, and most listed pairs (within W + skin) do not
-                        # touch. No margin: segments W or more apart exert no force. Where rounding puts a sample's
-                        # own distance below W while the segments' is not, the overlap is rounding (~1e-7 µm, a force
-                        # below 1e-3 pN) and the whole pair is skipped, so action and reaction stay equal. Measured:
-                        # S11's aligned start is a lattice at exactly W (18 700 of the 19 700 pairs within 1.001 W
-                        # are exactly W apart); with a 1e-3 margin each was evaluated in full, 85 000 sample tests a
-                        # step for 2 000 within W. Without it the forces there are bit for bit the same, positions
-                        # after 3000 steps within 2e-6 µm, and the step costs 12.3 M instructions instead of 22.1 M.
+                        # the segments' distance first (seg_distance's numbers: t's ends chained, a far pair cannot pass
+                        # by mapping them to different images); no sample is nearer. No margin: a sample within W only
+                        # by rounding (~1e-7 µm, < 1e-3 pN) goes with its whole pair. S11's start, a lattice at exactly W,
+                        # had 18 700 such pairs evaluated each step under a 1e-3 margin: 22.1 -> 12.3 M instructions.
                         At = self.rel(xt_a, xs_a)
                         Bt = self.rel(xt_b, xt_a)                 # t's second point in t's own frame
                         _, _, c1, c2 = closest_points(zero, Bs, At, At + Bt)
-                        if (c2 - c1).norm() < W:
-                            # every point computed once, in each sample's own frame (chain_points' numbers exactly):
-                            # s's samples against t's chain in s's frame, t's samples against s's chain in t's frame
+                        if (c2 - c1).norm() < self.W:
+                            # each sample's distances in its own frame (chain_points' numbers exactly)
                             Ts = [At, self.rel(xt_b, xs_a), self.rel(xt_p, xs_a), self.rel(xt_n, xs_a)]
                             St = [self.rel(xs_a, xt_a), self.rel(xs_b, xt_a), self.rel(xs_p, xt_a),
                                   self.rel(xs_n, xt_a)]
-                            # the two sides inlined, not a dynamic loop over them: that loop selected each point at run
-                            # time and gave back the instructions saved (22.2 M); compiling costs ~3 s more
+                            # the sides inlined: a dynamic loop selected every point at run time (22.2 M instructions)
                             sa, sb, ta, tb, _n = self.side(s, t, [zero, Bs], Ts, 0, s, 0)
                             pa, pb, oa, ob, _m = self.side(t, s, [zero, Bt], St, 0, s, 0)
                             v = ti.Vector([sa[0] + oa[0], sa[1] + oa[1], sb[0] + ob[0], sb[1] + ob[1],
