@@ -338,13 +338,15 @@ def test_ctrl_c_keeps_finished_runs_and_checkpoints_the_running_ones(tmp_path):
     import subprocess
     import sys
     import time
-    f = sweep_file(tmp_path, "run.hours = [0.001, 0.05]")
+    # the long run must outlast the wait for its progress line (written every 30 s to a log): 0.05 h finished in
+    # 21.7 s once the step got faster, before the interrupt; 0.5 h runs minutes, and is interrupted at its line
+    f = sweep_file(tmp_path, "run.hours = [0.001, 0.5]")
     f.write_text(f.read_text().replace("hours = 0.001\n", ""))
     root = tmp_path / "o"
     proc = subprocess.Popen([sys.executable, "-m", "taichimyxo", "sweep", str(f), "--jobs", "2", "--out", str(root)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
     short = lambda: next((root / "runs").glob("run.hours=0.001_*"), None)      # noqa: E731
-    long_ = lambda: next((root / "runs").glob("run.hours=0.05_*"), None)       # noqa: E731
+    long_ = lambda: next((root / "runs").glob("run.hours=0.5_*"), None)        # noqa: E731
     give_up = time.monotonic() + 900.0          # a safety net sized for a loaded machine (the short run is 3.6 s)
     while time.monotonic() < give_up:
         if short() and (short() / "result.json").is_file() and long_() and \
