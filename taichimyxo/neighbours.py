@@ -84,20 +84,8 @@ class NeighbourList:
 
     @ti.func
     def seg_distance(self, s, t):
-        """Distance between segments s and t (closest points, minimum image), in t's frame relative to s's first
-        particle, force precision."""
-        st = self.state
-        a, b = st.seg_ends(s)
-        c_, d_ = st.seg_ends(t)
-        pb = ti.cast(st.mi(st.x[b] - st.x[a]), st.fdt)
-        pc = ti.cast(st.mi(st.x[c_] - st.x[a]), st.fdt)
-        pd = pc + ti.cast(st.mi(st.x[d_] - st.x[c_]), st.fdt)
-        _, _, c1, c2 = closest_points(pb * 0.0, pb, pc, pd)
-        return (c2 - c1).norm()
-
-    @ti.func
-    def candidate_distance(self, s, t):
-        """seg_distance(s, t) for a pair the grid offers, or, when their midpoints are farther apart than the grid's
+        """Distance between segments s and t (closest points, minimum image; t's second end chained from its first,
+        in force precision) for a pair the grid offers, or, when their midpoints are farther apart than the grid's
         radius (l_max + the widest cutoff), the lower bound |m_s - m_t| - l_max without the closest-points test
         (either way >= a cutoff exactly when the distance is). The 3 x 3 bins hold about three times the candidates
         a disc of that radius does: most are rejected here for a few operations (S3 at paper scale after 3 simulated
@@ -197,7 +185,7 @@ class NeighbourList:
                     kt = t % (N - 1)
                     # a cell's own neighbouring segments are the springs' and the bending's business
                     if t != s and (ct != cs or abs(kt - ks) >= 2):
-                        d = self.candidate_distance(s, t)
+                        d = self.seg_distance(s, t)
                         if d < cut_c:
                             if n < self.max_nbrs:
                                 self.nbr[s, n] = t
