@@ -1,7 +1,10 @@
 """The accuracy study's outcome check (issue 15 item 5): does a larger step change what a user measures?
 
     python -m taichimyxo sweep sweeps/accuracy.toml --jobs 2 --out sweeps-results/accuracy    # the runs (~1.5 h)
-    python benchmarks/accuracy_outcomes.py [sweeps-results/accuracy] [--out DIR]   # default DIR: benchmarks-results
+    python benchmarks/accuracy_outcomes.py [sweeps-results/accuracy ...] [--out DIR]   # default DIR: benchmarks-results
+
+Several sweep folders are read as one (sweeps/step_control.toml is compared with the reference runs of
+sweeps/accuracy.toml this way).
 
 Trajectory errors of a few per cent are within the seed-to-seed spread of a chaotic many-cell system, so the
 trajectory tolerance of benchmarks/accuracy.py cannot say whether a step changes the *results*. This reads a sweep
@@ -101,21 +104,22 @@ def markdown(cmp: list[dict], reference: str) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("sweep_out", nargs="?", default="sweeps-results/accuracy")
+    ap.add_argument("sweep_out", nargs="*", default=["sweeps-results/accuracy"])
     ap.add_argument("--reference", default=None, help='the reference setting as JSON (default: the smallest '
                     'first swept value, e.g. {"run.dt_ms": 2})')
     ap.add_argument("--out", default="benchmarks-results")
     a = ap.parse_args(argv)
-    root = Path(a.sweep_out)
-    dirs = sorted((root / "runs").glob("*/"))
+    roots = [Path(p) for p in a.sweep_out]
+    where = ", ".join(str(r / "runs") for r in roots)
+    dirs = [d for r in roots for d in sorted((r / "runs").glob("*/"))]
     if not dirs:
-        print(f"accuracy_outcomes: no run folders in {root / 'runs'}")
+        print(f"accuracy_outcomes: no run folders in {where}")
         return 2
     rows = [r for r in (run_outcomes(d) for d in dirs) if r is not None]
     if not rows:
-        print(f"accuracy_outcomes: no finished run in {root / 'runs'}")
+        print(f"accuracy_outcomes: no finished run in {where}")
         return 2
-    settings = sorted({r["setting"] for r in rows}, key=lambda s: [v for v in json.loads(s).values()])
+    settings = sorted({r["setting"] for r in rows}, key=lambda s: [str(v) for v in json.loads(s).values()])
     reference = json.dumps(json.loads(a.reference), sort_keys=True) if a.reference else settings[0]
     if reference not in settings:
         print(f"accuracy_outcomes: reference {reference} has no finished run (settings: {', '.join(settings)})")

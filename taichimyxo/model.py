@@ -7,8 +7,8 @@ one fused kernel per step:
                         and tail segments gather guiding from their own short list
     cell_forces(c)      per cell, in its own frame: internal terms (springs, bending), engine, then the per-cell
                         terms (contacts gathered, guiding, slime)
-    after_move(c, m)    per cell after its particles moved: neighbour-list flag, slime claim or reversal clock
-    deposit(c)          per cell, a last loop when slime is on: the slime write, then the reversal clock
+    after_move(c, m, dt) per cell after its particles moved: neighbour-list flag, slime claim or reversal clock
+    deposit(c, dt)      per cell, a last loop when slime is on: the slime write, then the reversal clock
 
 Adding a force law: write its unit in taichimyxo/terms/ (parameters from the scene, fields, `add_cell_forces` or
 `pair_pass`, numpy energy, stiffness if stiff) and list it in `Model.__init__`.
@@ -99,20 +99,20 @@ class Model:
         return x0, X, F, T, Fi
 
     @ti.func
-    def after_move(self, c, moved):
+    def after_move(self, c, moved, dt):
         """After cell c's update: neighbour-list flag, then the slime claim (the reversal follows the slime write,
         in deposit) or the reversal clock."""
         self.nl.flag_moved(moved)
         if ti.static(self.has_slime):
             self.slime.claim(c)
         elif ti.static(self.has_reversals):
-            self.reversals.advance(c)
+            self.reversals.advance(c, dt)
 
     @ti.func
-    def deposit(self, c):
+    def deposit(self, c, dt):
         self.slime.write(c)
         if ti.static(self.has_reversals):
-            self.reversals.advance(c)
+            self.reversals.advance(c, dt)
 
     # ------------------------------------------------------------------ measurements
     @ti.kernel

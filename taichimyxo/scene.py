@@ -130,6 +130,9 @@ class Scene:
                                  f"(at most {cap})")
         if self.dt <= 0:
             raise SceneError("run.dt_ms resolved to zero")
+        if self.step_control == "error" and self.integrator != "explicit":
+            raise SceneError(f"run.step_control = 'error' needs run.integrator = 'explicit' (not "
+                             f"{self.integrator!r}): its error estimate is the explicit step's")
         if self.hours * 3600 < self.dt:
             raise SceneError(f"run.hours = {self.hours:g} is shorter than one step")
         o = self.raw["output"]
@@ -370,6 +373,24 @@ class Scene:
         if ms > 0:
             return ms * 1e-3
         return default_dt_ms(self) * 1e-3
+
+    @property
+    def step_control(self) -> str:
+        """"fixed" or "error" (taichimyxo/integrators/step_control.py)."""
+        return self.raw["run"]["step_control"]
+
+    @property
+    def step_tolerance_um(self) -> float:
+        return self.raw["run"]["step_tolerance_um"]
+
+    @property
+    def step_max_multiple(self) -> int:
+        return self.raw["run"]["step_max_multiple"]
+
+    @property
+    def longest_step(self) -> float:
+        """The longest step a run takes, s: run.dt_ms, or step_max_multiple of it under step control."""
+        return self.dt * (self.step_max_multiple if self.step_control == "error" else 1)
 
     @property
     def hours(self) -> float:

@@ -118,7 +118,7 @@ class Simulation:
             f.from_numpy(st[name])
         self.state.x_snap.from_numpy(st["x_snap"])
         self.state.snap_step = int(st["snap_step"])
-        self.integrator.reset()
+        self.integrator.reset(restored=True)
         self.neighbours.rebuild()
 
     # ------------------------------------------------------------------ driving
@@ -128,14 +128,26 @@ class Simulation:
         was built, and the list is rebuilt as soon as one has moved half the skin: then, at every force evaluation,
         no two particles have closed in by more than the skin since the build, whatever their speed (a guided head
         swings at up to F_max / zeta_n ~ 32 v_b; an interval chosen for an assumed top speed is no guarantee).
-        The check costs one comparison per particle inside the step kernel, which returns the flag."""
+        The check costs one comparison per particle inside the step kernel, which returns the flag.
+        With run.step_control = "error" (and dt not given) n_steps counts scene steps, and the controller chooses
+        how many of them each step covers (taichimyxo/integrators/step_control.py)."""
+        step = self.integrator.step
+        control = getattr(self.integrator, "control", None)
+        if control is not None and dt is None:
+            left = n_steps
+            while left > 0:
+                m = control.next_step(left)
+                self.step_count += m
+                left -= m
+                if control.took(step(m * self.layout.dt), m):
+                    self.neighbours.rebuild()
+            return
         dt = self.layout.dt if dt is None else dt
         if dt != self.layout.dt:
             self.time_offset += n_steps * (dt - self.layout.dt)
-        step = self.integrator.step
         for _ in range(n_steps):
             self.step_count += 1
-            if step(dt):
+            if step(dt) & 1:
                 self.neighbours.rebuild()
 
     def attach(self, writer) -> None:

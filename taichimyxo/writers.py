@@ -313,6 +313,8 @@ def run_summary(run, path: Path, files: dict, checkpoint, resumed: bool, setup_s
         "files": {k: Path(v).name for k, v in files.items()},
         "scene_values": scene.to_dict(),
     }
+    if scene.step_control == "error":       # steps taken, scene steps they covered, mean and current multiple
+        summary["step_control"] = sim.solver_stats()
     if status in ("interrupted", "failed") and checkpoint is not None:
         summary["files"]["checkpoint"] = Path(checkpoint).name
     if run.broken is not None:

@@ -1,11 +1,13 @@
 """The explicit step (docs/model.md "Equation of motion"): forces at x_n, then the semi-implicit Euler step of
 m dv/dt = F - zeta v with the drag implicit, v_n+1 = (m v_n + dt F) / (m + dt zeta) per axis (t, n);
 x_n+1 = x_n + dt v_n+1. With m = 0 (the paper's model, the default) this is the overdamped step
-v = F_t / zeta_t + F_n / zeta_n. One fused kernel per step."""
+v = F_t / zeta_t + F_n / zeta_n. One fused kernel per step. With run.step_control = "error" the step's length is
+chosen by the controller of step_control.py, whose estimate the kernel computes from each particle's velocity."""
 
 import taichi as ti
 
 from ..state import perp
+from .step_control import StepControl
 
 
 @ti.data_oriented
@@ -18,6 +20,8 @@ class Explicit:
         self.zeta_t, self.zeta_n = scene.zeta_t, scene.zeta_n
         self.mass = scene.mass                  # pN s^2 / µm per particle; 0: overdamped
         self.v = state.vec(fb, state.n_p, state.fdt) if self.mass > 0 else None
+        self.control = StepControl(scene, state, fb) if scene.step_control == "error" else None
+        self.controlled = self.control is not None
 
     @ti.kernel
     def _step(self, dt: ti.f64) -> ti.i32:
@@ -29,6 +33,7 @@ class Explicit:
         for c in range(st.n_cells):
             x0, X, F, T, Fi = m.cell_forces(c)
             moved = 0
+            dv = ti.cast(0.0, ti.f32)
             for k in ti.static(range(N)):
                 t = ti.Vector([T[k, 0], T[k, 1]])
                 n = perp(t)
@@ -43,23 +48,37 @@ class Explicit:
                     self.v[c * N + k] = v
                 else:
                     v = ft / self.zeta_t * t + fn / self.zeta_n * n
+                if ti.static(self.controlled):
+                    dv = ti.max(dv, self.control.change(c * N + k, v))
                 xn = x0 + ti.cast(ti.Vector([X[k, 0], X[k, 1]]) + v * dt, st.pdt)
                 moved |= self.nl.store(c * N + k, xn)
-            m.after_move(c, moved)
+            if ti.static(self.controlled):
+                self.control.cell_dv[c] = dv
+            m.after_move(c, moved, dt)
         if ti.static(m.has_slime):
             ti.loop_config(**st.loops.items)
             for c in range(st.n_cells):
-                m.deposit(c)
-        return self.nl.flags[1]
+                m.deposit(c, dt)
+        code = 0
+        if ti.static(self.controlled):
+            code = 2 * self.control.ratio_code(dt)
+        return self.nl.flags[1] + code
 
     def step(self, dt: float) -> int:
+        """One step of dt s; returns the rebuild flag, plus twice the controller's quantised error ratio when
+        run.step_control = "error" (StepControl.took decodes it)."""
         return self._step(dt)
 
-    def reset(self) -> None:
-        pass
+    def reset(self, restored: bool = False) -> None:
+        """The state was replaced (restored: from a checkpoint, with the controller's history)."""
+        if self.control is not None:
+            self.control.restored() if restored else self.control.start()
 
     def checkpoint_fields(self) -> dict:
-        return {"v": self.v} if self.v is not None else {}
+        out = {"v": self.v} if self.v is not None else {}
+        if self.control is not None:
+            out.update(self.control.checkpoint_fields())
+        return out
 
     def stats(self) -> dict:
-        return {}
+        return self.control.stats() if self.control is not None else {}

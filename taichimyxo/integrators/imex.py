@@ -106,8 +106,9 @@ class Imex:
         self.cgi = ti.field(ti.i32)               # 0 state (0 iterating, 1 converged, 2 step done), 1 iterations
         fb.dense(ti.i, 8).place(self.cgs, self.cgi)   # this step, 2 total iterations, 3 steps
 
-    def reset(self) -> None:
-        """Forget the previous step's velocities (the state was replaced)."""
+    def reset(self, restored: bool = False) -> None:
+        """Forget the previous step's velocities (the state was replaced, or restored from a checkpoint, which does
+        not keep them)."""
         self.vel.fill(0)
         if self.coupled:
             self.vprev.fill(0)
@@ -177,16 +178,16 @@ class Imex:
             p = c * N + k
             v = ti.Vector([self.vel[2 * p], self.vel[2 * p + 1]])
             moved |= self.nl.store(p, st.x[p] + ti.cast(v * dt, st.pdt))
-        self.model.after_move(c, moved)
+        self.model.after_move(c, moved, dt)
 
     @ti.func
-    def _deposit_pass(self, gated: ti.template()):
+    def _deposit_pass(self, gated: ti.template(), dt):
         m = self.model
         if ti.static(m.has_slime):
             ti.loop_config(**self.state.loops.items)
             for c in range(self.state.n_cells):
                 if not gated or self.cgi[0] == 1:
-                    m.deposit(c)
+                    m.deposit(c, dt)
 
     # ------------------------------------------------------------------ kernels
     @ti.kernel
@@ -204,7 +205,7 @@ class Imex:
                 self._factor(c, dtf)
                 self.band.solve(c, self.rhs, self.vel)
                 self._advance_cell(c, dt)
-            self._deposit_pass(False)
+            self._deposit_pass(False, dt)
             ti.loop_config(**self.state.loops.one_thread)
             for _ in range(1):
                 self.cgi[3] += 1
@@ -361,7 +362,7 @@ class Imex:
                 base = c * self.n2
                 for i in range(self.n2):
                     self.vprev[base + i] = self.vel[base + i]
-        self._deposit_pass(True)
+        self._deposit_pass(True, dt)
         ti.loop_config(**self.state.loops.one_thread)
         for _ in range(1):
             if self.cgi[0] == 1:

@@ -2,7 +2,8 @@
 clock reaches its period; periods ~ Normal(T_R, sd) truncated below, initial phases uniform, drawn from a
 counter-based random stream (taichimyxo/rng.py), so runs are reproducible on any number of threads. With
 suppression, a cell in a head-to-tail interaction this step does not reverse; its clock restarts. Clocks are
-integers (steps): exact over hours."""
+integers (scene steps, run.dt_ms): exact over hours. A step of another length (run.step_control = "error" takes
+whole multiples of the scene's step) advances them by its length in scene steps, rounded, at least one."""
 
 import math
 
@@ -19,6 +20,7 @@ class Reversals:
         self.state = state
         self.seed = scene.seed
         T = scene.reversal_period_s / scene.dt
+        self.dt0 = scene.dt
         self.period_mean_steps = T
         self.period_sd_steps = T * scene.reversal_sd_fraction
         self.period_min_steps = max(1.0, T * scene.reversal_min_fraction)
@@ -49,10 +51,10 @@ class Reversals:
             self.rev_count[c] = 0
 
     @ti.func
-    def advance(self, c):
-        """Advance cell c's clock; reverse when it reaches the period, unless suppressed."""
+    def advance(self, c, dt):
+        """Advance cell c's clock by a step of dt s; reverse when it reaches the period, unless suppressed."""
         st = self.state
-        self.rev_clock[c] += 1
+        self.rev_clock[c] += ti.max(1, ti.cast(ti.round(dt / self.dt0), ti.i32))
         if self.rev_clock[c] >= self.rev_period[c]:
             self.rev_clock[c] = 0
             skip = False
