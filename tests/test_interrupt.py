@@ -61,7 +61,14 @@ SCENES = {
     # slime trails (the grid)
     "all-effects": {"guiding": {"kind": "active"}, "slime": {"enabled": True},
                     "reversals": {"enabled": True, "period_min": 0.02, "suppression": True}},
+    # the same under the step-size controller: its multiple and velocity history are in the checkpoint too
+    "step-control": {"guiding": {"kind": "active"}, "slime": {"enabled": True},
+                     "reversals": {"enabled": True, "period_min": 0.02, "suppression": True},
+                     "run": {"step_control": "error", "step_max_multiple": 3}},
 }
+# where the split run stops: inside a speed window; under the controller at a chunk's end (the start of the window
+# 2600-3600), as an interrupt does: a stop elsewhere cuts a step the uninterrupted run takes whole
+STOP = {"step-control": 2600}
 
 
 @pytest.mark.slow                   # 4-5 s each with warm kernel caches, up to 20 s cold
@@ -74,7 +81,7 @@ def test_stop_and_resume_in_process_equals_uninterrupted(ti_cpu, tmp_path, varia
     from taichimyxo.scene_run import run_scene
     from taichimyxo.trajectory import count_frames, read_frames
     sections = dict(SCENES[variant])
-    sections["run"] = {"hours": 0.002, "seed": 7, "dt_ms": 1.0}         # 7200 steps
+    sections["run"] = {"hours": 0.002, "seed": 7, "dt_ms": 1.0, **sections.get("run", {})}     # 7200 steps
     sections["output"] = {"movie": False, "frame_interval_min": 0.02}   # a frame every 1200 steps
     sc = build_small_scene(20, **sections)
     assert sc.steps == 7200
@@ -85,27 +92,32 @@ def test_stop_and_resume_in_process_equals_uninterrupted(ti_cpu, tmp_path, varia
     assert full["steps"] == 7200
 
     # interrupted inside a speed window (windows of 1000 steps end at each frame: 2600-3600 here)
-    part = run_scene(sc, out_dir=split, stop_after_steps=3100, **kw)
-    assert part["status"] == "interrupted" and part["steps"] == 3100 and not part["completed"]
+    stop = STOP.get(variant, 3100)
+    part = run_scene(sc, out_dir=split, stop_after_steps=stop, **kw)
+    assert part["status"] == "interrupted" and part["steps"] == stop and not part["completed"]
     assert part["files"]["checkpoint"] == f"{sc.name}.ckpt.npz"
     js = json.loads((split / f"{sc.name}.json").read_text())
-    assert js["status"] == "interrupted" and js["steps"] == 3100
+    assert js["status"] == "interrupted" and js["steps"] == stop
     gsd = split / f"{sc.name}.gsd"
     frames = list(read_frames(str(gsd)))                                # closed, readable
     assert [f.step for f in frames] == [0, 1200, 2400] and count_frames(str(gsd)) == 3
-    assert int(_ckpt(split, sc.name)["step"]) == 3100
+    assert int(_ckpt(split, sc.name)["step"]) == stop
 
-    rest = run_scene(sc, out_dir=split, resume=True, stop_after_steps=4100, **kw)
+    rest = run_scene(sc, out_dir=split, resume=True, stop_after_steps=7200 - stop, **kw)
     assert rest["steps"] == 7200
     a, b = _ckpt(split, sc.name), _ckpt(ref, sc.name)
     assert a.keys() == b.keys()
-    if variant == "all-effects":
+    if variant != "plain":
         assert {"rev_clock", "rev_period", "rev_count", "slime"} <= a.keys()
         assert a["rev_count"].sum() > 0 and np.abs(a["slime"]).sum() > 0   # reversals and trails on the way
     for k in a:
         assert np.array_equal(a[k], b[k]), f"checkpoint field {k} differs after resume"
     assert_same_frames(gsd_frames(split / f"{sc.name}.gsd"), gsd_frames(ref / f"{sc.name}.gsd"))
     assert count_frames(str(gsd)) == 7
+    if variant == "step-control":
+        sc_full = json.loads((ref / f"{sc.name}.json").read_text())["step_control"]
+        assert {"step_v_prev", "step_control"} <= a.keys()
+        assert rest["step_control"] == sc_full and sc_full["steps_taken"] < 7200 / 1.5   # long steps were taken
 
 
 @needs_render

@@ -40,7 +40,7 @@ class StepControl:
         self.max_multiple = scene.step_max_multiple
         self.v_prev = state.vec(fb, state.n_p, state.fdt)       # each particle's velocity in the last step
         self.cell_dv = state.scalar(fb, state.n_cells, ti.f32)  # per cell: max |v_n - v_n-1| this step
-        self.saved = state.scalar(fb, 2, ti.i32)                # the multiple and the steps taken, for checkpoints
+        self.saved = state.scalar(fb, 3, ti.i32)                # multiple, steps taken, scene steps: checkpoints
         self.multiple = 1
         self.steps_taken = 0
         self.ticks = 0
@@ -88,11 +88,11 @@ class StepControl:
         self.steps_taken = self.ticks = 0
 
     def checkpoint_fields(self) -> dict:
-        self.saved[0], self.saved[1] = self.multiple, self.steps_taken
+        self.saved[0], self.saved[1], self.saved[2] = self.multiple, self.steps_taken, self.ticks
         return {"step_v_prev": self.v_prev, "step_control": self.saved}
 
     def restored(self) -> None:
-        self.multiple, self.steps_taken = int(self.saved[0]), int(self.saved[1])
+        self.multiple, self.steps_taken, self.ticks = int(self.saved[0]), int(self.saved[1]), int(self.saved[2])
 
     def stats(self) -> dict:
         return {"steps_taken": self.steps_taken, "scene_steps": self.ticks,

@@ -56,7 +56,9 @@ class Reversals:
         st = self.state
         self.rev_clock[c] += ti.max(1, ti.cast(ti.round(dt / self.dt0), ti.i32))
         if self.rev_clock[c] >= self.rev_period[c]:
-            self.rev_clock[c] = 0
+            # the scene steps past the period carry over (none with single steps), so a longer step delays a
+            # reversal by less than one step and never shifts the ones after it
+            self.rev_clock[c] -= self.rev_period[c]
             skip = False
             if ti.static(self.suppressed):
                 skip = self.head_tail.interacts(c)
