@@ -368,8 +368,18 @@ def cmd_bench(args) -> int:
     return 0
 
 
+def _catch_ctrl_c() -> None:
+    """Ctrl-C (SIGINT) stops a run or a sweep cleanly, even when the process inherited SIGINT ignored: a POSIX
+    shell starts a background command (`taichimyxo sweep ... &` in a script) that way, and Python then never raises
+    KeyboardInterrupt, so `kill -INT` would be lost (a sweep's own loop relies on KeyboardInterrupt)."""
+    import signal
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
 def main(argv: list[str] | None = None) -> int:
     args = _build_parser().parse_args(argv)
+    _catch_ctrl_c()
     try:
         if args.cmd == "list":
             return cmd_list()
