@@ -58,12 +58,15 @@ def default_dt_ms(scene) -> float:
 
 
 def check_step(scene, force: bool = False) -> None:
+    if force:
+        return
     lim = stable_limit_ms(scene)
-    dt_ms = scene.longest_step * 1e3
-    if dt_ms > lim and not force and scene.step_control == "error":
-        raise SceneError(f"run.step_max_multiple = {scene.step_max_multiple} makes the longest step {dt_ms:g} ms, "
-                         f"beyond the stability limit {lim:.3g} ms of the explicit integrator at "
-                         f"{scene.stiffness_label}; use a smaller multiple or --force")
-    if dt_ms > lim and not force:
+    dt_ms = scene.dt * 1e3
+    if dt_ms > lim:
         raise SceneError(f"run.dt_ms = {dt_ms:g} exceeds the stability limit {lim:.3g} ms of the {scene.integrator} "
                          f"integrator at {scene.stiffness_label}; use a smaller step or --force")
+    longest = scene.longest_step * 1e3           # the step-size controller's longest step (run.dt_ms without it)
+    if longest > lim:
+        raise SceneError(f"run.step_max_multiple = {scene.step_max_multiple} makes the longest step {longest:g} ms, "
+                         f"beyond the stability limit {lim:.3g} ms of the explicit integrator at "
+                         f"{scene.stiffness_label}; use a smaller multiple or --force")
