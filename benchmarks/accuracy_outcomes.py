@@ -1,10 +1,14 @@
 """The accuracy study's outcome check (issue 15 item 5): does a larger step change what a user measures?
 
     python -m taichimyxo sweep sweeps/accuracy.toml --jobs 2 --out sweeps-results/accuracy    # the runs (~1.5 h)
-    python benchmarks/accuracy_outcomes.py [sweeps-results/accuracy ...] [--out DIR]   # default DIR: benchmarks-results
+    python benchmarks/accuracy_outcomes.py [sweeps-results/accuracy ...] [--rows CSV ...] [--out DIR]
+                                                                     # default DIR: benchmarks-results
 
 Several sweep folders are read as one (sweeps/step_control.toml is compared with the reference runs of
-sweeps/accuracy.toml this way).
+sweeps/accuracy.toml this way), and `--rows` adds the runs of an earlier accuracy_outcomes.csv (this script's own
+rows: runs whose folders are gone, e.g. benchmarks/results/accuracy_outcomes.csv), so seeds run on different days
+are compared as one ensemble without running them again. A run in both (same setting and seed) is taken from its
+folder.
 
 Trajectory errors of a few per cent are within the seed-to-seed spread of a chaotic many-cell system, so the
 trajectory tolerance of benchmarks/accuracy.py cannot say whether a step changes the *results*. This reads a sweep
@@ -56,6 +60,27 @@ def run_outcomes(run_dir: Path) -> dict | None:
     return row
 
 
+NUMERIC = ("simulated_h", "wall_s", "steps", "wall_s_per_sim_h")
+
+
+def read_rows(path: Path) -> list[dict]:
+    """The rows of an earlier accuracy_outcomes.csv, typed as run_outcomes writes them (empty: None)."""
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    out = []
+    for r in rows:
+        row = {}
+        for k, v in r.items():
+            if k == "setting":
+                row[k] = json.dumps(json.loads(v), sort_keys=True)
+            elif k in ("seed", "steps"):
+                row[k] = int(v)
+            else:
+                row[k] = float(v) if v not in ("", None) else None
+        out.append(row)
+    return out
+
+
 def compare(rows: list[dict], reference: str) -> list[dict]:
     """Per setting and outcome: seed mean, SD, values; reference range; agreement (mean within the range)."""
     by: dict[str, list[dict]] = {}
@@ -104,21 +129,35 @@ def markdown(cmp: list[dict], reference: str) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("sweep_out", nargs="*", default=["sweeps-results/accuracy"])
+    ap.add_argument("sweep_out", nargs="*", help="sweep output folders (default: sweeps-results/accuracy, "
+                    "unless --rows is given)")
+    ap.add_argument("--rows", action="append", default=[], metavar="CSV",
+                    help="add the runs of an earlier accuracy_outcomes.csv (repeatable)")
     ap.add_argument("--reference", default=None, help='the reference setting as JSON (default: the smallest '
                     'first swept value, e.g. {"run.dt_ms": 2})')
     ap.add_argument("--out", default="benchmarks-results")
     a = ap.parse_args(argv)
-    roots = [Path(p) for p in a.sweep_out]
-    where = ", ".join(str(r / "runs") for r in roots)
+    for p in a.rows:
+        if not Path(p).is_file():
+            print(f"accuracy_outcomes: --rows {p}: no such file")
+            return 2
+    roots = [Path(p) for p in (a.sweep_out or ([] if a.rows else ["sweeps-results/accuracy"]))]
+    where = ", ".join([str(r / "runs") for r in roots] + a.rows)
     dirs = [d for r in roots for d in sorted((r / "runs").glob("*/"))]
-    if not dirs:
+    if roots and not dirs:
         print(f"accuracy_outcomes: no run folders in {where}")
         return 2
     rows = [r for r in (run_outcomes(d) for d in dirs) if r is not None]
+    have = {(r["setting"], r["seed"]) for r in rows}
+    for p in a.rows:
+        for r in read_rows(Path(p)):
+            if (r["setting"], r["seed"]) not in have:
+                rows.append(r)
+                have.add((r["setting"], r["seed"]))
     if not rows:
         print(f"accuracy_outcomes: no finished run in {where}")
         return 2
+    rows.sort(key=lambda r: (r["setting"], r["seed"]))
     settings = sorted({r["setting"] for r in rows}, key=lambda s: [str(v) for v in json.loads(s).values()])
     reference = json.dumps(json.loads(a.reference), sort_keys=True) if a.reference else settings[0]
     if reference not in settings:
@@ -127,7 +166,7 @@ def main(argv=None) -> int:
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     with open(out / "accuracy_outcomes.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, list(rows[0]))
+        w = csv.DictWriter(f, list(dict.fromkeys(k for r in rows for k in r)))
         w.writeheader()
         w.writerows(rows)
     cmp = compare(rows, reference)

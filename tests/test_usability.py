@@ -276,6 +276,33 @@ def test_benchmarks_default_to_a_results_folder_in_the_current_directory(tmp_pat
     assert written["explicit"]["1e-17/0.01"] == 5.0 and written["defaults"]["explicit"]["1e-17/0.01"] == 2.0
 
 
+def test_accuracy_outcomes_compares_seeds_run_on_different_days_as_one_ensemble(tmp_path, capsys):
+    """The outcome check reads the runs of an earlier accuracy_outcomes.csv (--rows) as well as sweep folders, so a
+    reference extended by new seeds is compared as one ensemble; a run listed twice counts once."""
+    mod = _benchmark("accuracy_outcomes")
+    head = ("setting,seed,simulated_h,wall_s,steps,wall_s_per_sim_h,n_aggregates,aggregate_cells,"
+            "fraction_in_aggregates,edge_speed_vb,speed_p95_vb")
+    ref, big = '"{""run.dt_ms"": 2}"', '"{""run.dt_ms"": 4}"'
+
+    def row(setting, seed, frac):
+        return f"{setting},{seed},1.0,100.0,1800000,100.0,20,14,{frac},1.6,1.9"
+    first = tmp_path / "first.csv"
+    first.write_text("\n".join([head, row(ref, 1, 0.60), row(ref, 2, 0.58), row(big, 1, 0.50)]) + "\n")
+    later = tmp_path / "later.csv"
+    later.write_text("\n".join([head, row(ref, 3, 0.45), row(ref, 1, 0.99), row(big, 2, 0.52)]) + "\n")
+    out = tmp_path / "out"
+    assert mod.main(["--rows", str(first), "--rows", str(later), "--out", str(out)]) == 0
+    cmp = {(c["setting"], c["outcome"]): c for c in mod.compare(mod.read_rows(out / "accuracy_outcomes.csv"),
+                                                                 '{"run.dt_ms": 2}')}
+    frac = cmp[('{"run.dt_ms": 2}', "fraction_in_aggregates")]
+    assert frac["values"] == [0.60, 0.58, 0.45]            # seed 1 from the first file, once
+    four = cmp[('{"run.dt_ms": 4}', "fraction_in_aggregates")]
+    assert four["seeds"] == 2 and four["agrees"] is True    # mean 0.51 within the reference's 0.45-0.60
+    assert "agrees with the reference on every outcome" in (out / "accuracy_outcomes.md").read_text()
+    assert mod.main(["--rows", str(tmp_path / "missing.csv")]) == 2
+    assert "no such file" in capsys.readouterr().out
+
+
 # ------------------------------------------------------------------------------------------------ resume, invariants
 def test_resume_with_fewer_hours_than_done_is_refused_and_keeps_the_checkpoint(ti_cpu, tmp_path):
     from taichimyxo.scene_run import run_scene
