@@ -60,9 +60,6 @@ def run_outcomes(run_dir: Path) -> dict | None:
     return row
 
 
-NUMERIC = ("simulated_h", "wall_s", "steps", "wall_s_per_sim_h")
-
-
 def read_rows(path: Path) -> list[dict]:
     """The rows of an earlier accuracy_outcomes.csv, typed as run_outcomes writes them (empty: None)."""
     with open(path, newline="") as f:

@@ -22,8 +22,8 @@ sparse start 2.2e-5 / 1.2e-4 / 2.0e-4 µm, after 3 simulated minutes (forming ag
 change velocity by ~2 µm/s every step, in alternating directions, at 1 to 4 ms alike: force jumps (a guided head's
 pull is F_max^g at gap d_g and zero beyond it, docs/model.md term 5; in contacts, a pole in the concave side of a
 bent neighbour's joint, whose nearest segment alternates between the two meeting there, term 4) that no step size
-resolves. So in aggregates the controller takes single steps: over a simulated
-hour of half-scale S3 at tolerance 1e-3 µm, 1.05-1.09 scene steps per step (README "What accuracy costs").
+resolves. So in aggregates the controller takes single steps: over a simulated hour of half-scale S3 at tolerance
+1e-3 µm, 1.05-1.09 scene steps per step (README "What accuracy costs").
 """
 
 import math
