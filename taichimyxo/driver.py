@@ -12,8 +12,12 @@
   resumed run measures the same speeds as an uninterrupted one;
 - after every chunk calls each writer's ``after_chunk`` (progress line, invariants between frames) and asks the
   other triggers (:class:`taichimyxo.triggers.WallClock`: checkpoints) whether they fire;
-- stops cleanly on SIGINT/SIGTERM (``catch_signals``: the chunk finishes, status "interrupted") and on a broken
-  invariant or a neighbour-list overflow (status "failed", ``Run.broken`` says why);
+- stops cleanly on SIGINT/SIGTERM (``catch_signals``: the chunk finishes, status "interrupted");
+- rolls back on a broken invariant or a neighbour-list overflow (``rollback``, docs/model.md "Numerics"): the
+  state is copied in memory before every chunk, and a chunk that breaks one is redone from that copy with each
+  scene step split into 2 (then 4, 8) shorter steps; the scene's step resumes after it. Writers see no frame of
+  the broken attempt. When the shortest split breaks too, or with ``rollback=False``, the run stops (status
+  "failed", ``Run.broken`` says why, ``Run.gave_up`` after rollbacks, the state back at the last good copy);
 - closes every writer (any status), then calls each writer's ``finish`` (what depends on how the run ended: the
   checkpoint, the last-frame panel, the summary).
 """
@@ -28,6 +32,9 @@ from .triggers import is_step_trigger
 
 class InvariantBroken(RuntimeError):
     """The state broke a numerical invariant: the step is too large for the configuration (or the model blew up)."""
+
+
+MAX_SPLIT = 8        # a chunk whose scene steps split into 8 still breaks an invariant: the run stops there
 
 
 class Interrupt:
@@ -61,12 +68,13 @@ class Run:
     status: "running", then "completed", "interrupted" or "failed" (broken: why). frame: the Frame of the current
     step (made once per step, on first use). full_window: the current frame's speeds were averaged over the full
     speed window. last_frame: the last frame handed to writers. wall_seconds: from the start until every writer
-    was closed. steps_done: steps advanced in this call."""
+    was closed. steps_done: steps advanced in this call. gave_up: the run stopped after rolling back to the
+    same place with every split (sim.rollbacks lists the rollbacks)."""
 
     def __init__(self, sim, writers, end_step: int):
         self.sim, self.writers = sim, writers
         self.start_step, self.end_step = sim.step_count, end_step
-        self.status, self.broken = "running", None
+        self.status, self.broken, self.gave_up = "running", None, False
         self.steps_done, self.wall_seconds = 0, 0.0
         self.full_window = False
         self.last_frame = None
@@ -107,13 +115,15 @@ _window_opened = weakref.WeakKeyDictionary()
 
 
 def drive(sim, n_steps: int, writers=(), *, chunk_steps: int = 2000, speed_window_s: float | None = None,
-          catch_signals: bool = True, stop_after_steps: int | None = None, close: bool = True) -> Run:
+          catch_signals: bool = True, stop_after_steps: int | None = None, close: bool = True,
+          rollback: bool = True) -> Run:
     """Advance `sim` by `n_steps` steps of the scene's time step with `writers` attached; returns the :class:`Run`.
 
     speed_window_s: the displayed speed's window (default: the scene's run.speed_window_s). catch_signals: SIGINT
     and SIGTERM end the run after the current chunk (status "interrupted") instead of raising KeyboardInterrupt.
     stop_after_steps (tests): behave as if interrupted after that many steps. close: close the writers at the end
-    (False keeps them open for a next call; ``finish`` is called either way)."""
+    (False keeps them open for a next call; ``finish`` is called either way). rollback: redo a chunk that breaks an
+    invariant at split steps (module docstring); False stops the run at the first breach."""
     from .neighbours import NeighbourOverflow
 
     dt = sim.scene.dt
@@ -158,6 +168,35 @@ def drive(sim, n_steps: int, writers=(), *, chunk_steps: int = 2000, speed_windo
         except TypeError:
             pass
 
+    def advance_chunk(n, F):
+        """n steps, the frame at F if they reach it, the writers' after_chunk; rolled back and redone at split
+        steps when they break an invariant."""
+        snapshot = sim.get_checkpoint() if rollback else None
+        split, redone = 1, []
+        while True:
+            try:
+                sim.run(n) if split == 1 else sim.run_split(n, split)
+                run.steps_done += n
+                if sim.step_count == F:
+                    event(F)
+                for w in writers:
+                    w.after_chunk(run)
+                return
+            except (InvariantBroken, NeighbourOverflow) as e:
+                if snapshot is None:
+                    raise
+                sim.load_checkpoint(snapshot)
+                sim.rollbacks.extend(redone)            # the copy predates this chunk's rollbacks
+                run._frame = None
+                run.steps_done = sim.step_count - run.start_step
+                if split >= MAX_SPLIT:
+                    run.gave_up = True
+                    raise InvariantBroken(f"{e}; rolled back to {sim.time:.6g} s and redone with the step split "
+                                          f"into 2, 4 and {MAX_SPLIT}, it breaks again there") from e
+                split *= 2
+                redone.append((sim.step_count, sim.time, split))
+                sim.rollbacks.append(redone[-1])
+
     forced = [-1]                     # where this call opened a window the schedule did not
     wall0 = time.perf_counter()
     try:
@@ -183,12 +222,7 @@ def drive(sim, n_steps: int, writers=(), *, chunk_steps: int = 2000, speed_windo
                 n = min(target - step, chunk_steps)
                 if stop_after_steps is not None:
                     n = min(n, max(0, stop_after_steps - run.steps_done))
-                sim.run(n)
-                run.steps_done += n
-                if sim.step_count == F:
-                    event(F)
-                for w in writers:
-                    w.after_chunk(run)
+                advance_chunk(n, F)
                 if intr.signum is not None or (stop_after_steps is not None and run.steps_done >= stop_after_steps):
                     run.status = "interrupted"
                     break

@@ -41,6 +41,7 @@ class Simulation:
         self.step_count = 0
         self.time_offset = 0.0      # simulated time of steps taken at another dt than the scene's, minus their share
         self.writers = []
+        self.rollbacks = []         # (step, simulated s, split) of each rollback (driver.py), kept in checkpoints
         self._closed = False
         backend.simulation_starting()
         fb = ti.FieldsBuilder()
@@ -105,7 +106,8 @@ class Simulation:
     def get_checkpoint(self) -> dict:
         st = {"x": self.state.x.to_numpy(), "x_snap": self.state.x_snap.to_numpy(), "ke": self.state.ke.to_numpy(),
               "step": np.array(self.step_count), "snap_step": np.array(self.state.snap_step),
-              "time_offset": np.array(self.time_offset)}
+              "time_offset": np.array(self.time_offset),
+              "rollbacks": np.array(self.rollbacks, dtype=np.float64).reshape(-1, 3)}
         st.update({name: f.to_numpy() for name, f in self._checkpointed().items()})
         return st
 
@@ -114,6 +116,8 @@ class Simulation:
         self.state.ke.from_numpy(st["ke"])
         self.step_count = int(st["step"])
         self.time_offset = float(st["time_offset"]) if "time_offset" in st else 0.0
+        done = np.asarray(st["rollbacks"]) if "rollbacks" in st else np.zeros((0, 3))
+        self.rollbacks = [(int(a), float(b), int(c)) for a, b, c in done]
         for name, f in self._checkpointed().items():
             f.from_numpy(st[name])
         self.state.x_snap.from_numpy(st["x_snap"])
@@ -149,6 +153,20 @@ class Simulation:
             self.step_count += 1
             if step(dt) & 1:
                 self.neighbours.rebuild()
+
+    def run_split(self, n_steps: int, split: int) -> None:
+        """Advance n_steps scene steps, each taken as `split` steps of dt / split (a rollback's redo, driver.py):
+        the step count, frames and reversal clocks still count scene steps."""
+        dt = self.layout.dt / split
+        reversals = self.model.reversals
+        step = self.integrator.step
+        for _ in range(n_steps):
+            self.step_count += 1
+            for k in range(split):
+                if reversals is not None:
+                    reversals.hold_clock(k < split - 1)
+                if step(dt) & 1:
+                    self.neighbours.rebuild()
 
     def attach(self, writer) -> None:
         """Attach a writer (taichimyxo.writers): run_for calls it whenever its trigger fires."""

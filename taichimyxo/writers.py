@@ -319,4 +319,8 @@ def run_summary(run, path: Path, files: dict, checkpoint, resumed: bool, setup_s
         summary["files"]["checkpoint"] = Path(checkpoint).name
     if run.broken is not None:
         summary["invariant_broken"] = run.broken
+    # each chunk redone at split steps after a broken invariant (driver.py), since the start of the run
+    summary["rollbacks"] = [{"step": st, "simulated_seconds": t, "split": k} for st, t, k in sim.rollbacks]
+    if run.gave_up:
+        summary["gave_up"] = True
     return summary

@@ -3,7 +3,9 @@ clock reaches its period; periods ~ Normal(T_R, sd) truncated below, initial pha
 counter-based random stream (taichimyxo/rng.py), so runs are reproducible on any number of threads. With
 suppression, a cell in a head-to-tail interaction this step does not reverse; its clock restarts. Clocks are
 integers (scene steps, run.dt_ms): exact over hours. A step of another length (run.step_control = "error" takes
-whole multiples of the scene's step) advances them by its length in scene steps, rounded, at least one."""
+whole multiples of the scene's step) advances them by its length in scene steps, rounded, at least one. A
+rollback's redo splits each scene step into shorter ones; the clock is held on all but the last of them, so it
+still counts scene steps (hold_clock)."""
 
 import math
 
@@ -30,6 +32,7 @@ class Reversals:
         self.rev_clock = state.scalar(fb, C, ti.i32)      # steps since the last reversal
         self.rev_period = state.scalar(fb, C, ti.i32)     # this cycle's period, steps
         self.rev_count = state.scalar(fb, C, ti.i32)      # reversals so far (counter of the random stream)
+        self.clock_held = state.scalar(fb, 1, ti.i32)     # 1: this step is a part of a split scene step
 
     @ti.func
     def draw_period(self, c, count):
@@ -54,7 +57,8 @@ class Reversals:
     def advance(self, c, dt):
         """Advance cell c's clock by a step of dt s; reverse when it reaches the period, unless suppressed."""
         st = self.state
-        self.rev_clock[c] += ti.max(1, ti.cast(ti.round(dt / self.dt0), ti.i32))
+        if self.clock_held[0] == 0:
+            self.rev_clock[c] += ti.max(1, ti.cast(ti.round(dt / self.dt0), ti.i32))
         if self.rev_clock[c] >= self.rev_period[c]:
             # the scene steps past the period carry over (none with single steps), so a longer step delays a
             # reversal by less than one step and never shifts the ones after it
@@ -66,3 +70,7 @@ class Reversals:
                 st.ke[c] = -st.ke[c]
                 self.rev_count[c] += 1
                 self.rev_period[c] = self.draw_period(c, self.rev_count[c])
+
+    def hold_clock(self, held: bool) -> None:
+        """Hold the clocks during the coming steps (parts of one split scene step) or let them count again."""
+        self.clock_held[0] = int(held)
