@@ -190,8 +190,8 @@ def test_cuda_free_cell_moves_at_v_b(cuda, precision):
 def test_bench_throughput_measures_writes_merges_and_projects(tmp_path, capsys):
     """`python -m taichimyxo bench throughput` at a tiny size: a row with a positive rate on the CPU, written to
     CSV and JSON, merged with the rows already in the folder (here S3 and S11 at paper scale, made up), from which
-    the full-S3 projection follows: 10.8 M steps x 16 000 particles / the rate. Without CUDA, --arch cuda is refused
-    in one line (no fallback: a CPU figure is never reported as a GPU's)."""
+    the full-S3 projection follows: 5.4 M steps (6 h at S3's 4 ms) x 16 000 particles / the rate. Without CUDA,
+    --arch cuda is refused in one line (no fallback: a CPU figure is never reported as a GPU's)."""
     import csv
     import json
 
@@ -209,10 +209,10 @@ def test_bench_throughput_measures_writes_merges_and_projects(tmp_path, capsys):
     with open(tmp_path / "throughput.csv") as f:
         assert len(list(csv.DictReader(f))) == 3
     p = doc["projection_full_S3"]["cpu"]
-    assert p["steps"] == 10_800_000 and p["particles"] == 16_000
-    assert p["sparse_wall_h"] == pytest.approx(10.8e6 * 16e3 / 32e6 / 3600, rel=1e-3)
+    assert p["steps"] == 5_400_000 and p["particles"] == 16_000
+    assert p["sparse_wall_h"] == pytest.approx(5.4e6 * 16e3 / 32e6 / 3600, rel=1e-3)
     assert p["dense_wall_h"] == pytest.approx(4 * p["sparse_wall_h"], rel=1e-3)
-    assert "full 6 h S3 at paper scale on cpu: 90.0 min" in capsys.readouterr().out
+    assert "full 6 h S3 at paper scale on cpu: 45.0 min" in capsys.readouterr().out
     if _no_cuda_reason():
         assert main(["bench", "throughput", "--arch", "cuda", "--sizes", "1", "--out", str(tmp_path)]) == 2
         assert "no fallback" in capsys.readouterr().err
