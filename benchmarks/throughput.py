@@ -1,9 +1,12 @@
-"""Throughput: particle-steps per second per scene and size, measured in one run, plus the cost of each effect as a
-ratio to the non-guided scene (S1) on the same start.
+"""Throughput: first the states users' runs spend their time in (benchmarks/states.py: S3 after one simulated hour
+at paper scale and S13 dense, beside S3's start) with the full 6 h S3 each projects; then particle-steps per second
+per scene and size, measured in one run, with the cost of each effect as a ratio to the non-guided scene (S1) on the
+same start.
 
     python benchmarks/throughput.py [--quick] [--out DIR]
 
-Writes throughput.csv (throughput_quick.csv with --quick) and a .txt naming the machine into the output folder
+Writes states.csv, throughput.csv (throughput_quick.csv with --quick) and a .txt naming the machine into the output
+folder
 (default benchmarks-results/ in the current directory) and prints a table. Rates, never timed asserts: these
 machines are shared and noisy; ratios within one run are what to compare. The measuring itself is the package's
 (taichimyxo/bench.py, also `python -m taichimyxo bench throughput`: S1, S3, S11 at 1x, 4x, 16x the paper's area,
@@ -42,10 +45,19 @@ def measure(name: str, scale: float, n_steps: int, warm: int, precision: str | N
 
 def main(quick: bool = False, out_dir: str = DEFAULT_OUT) -> list[dict]:
     from taichimyxo import backend
+    from states import measure as measure_states
     backend.init("cpu")
     rows = []
     sizes = [1.0] if quick else [1.0, 0.5, 0.25]
     n_steps = 500 if quick else 2000
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    states = measure_states(n_steps, warm=200)
+    for r in states:
+        print(f"{r['state']:>10} {r['particles']:>6} particles {r['ms_per_step']:7.3f} ms/step at {r['dt_ms']:g} ms "
+              f"{r['particle_steps_per_s'] / 1e6:6.2f} M particle-steps/s: a full 6 h S3 in "
+              f"{r['full_S3_6h_wall_h']:.2f} h", flush=True)
+    write_csv(out / ("states_quick.csv" if quick else "states.csv"), states)
     for scale in sizes:
         base = None
         for name, what in SCENES:
@@ -68,8 +80,6 @@ def main(quick: bool = False, out_dir: str = DEFAULT_OUT) -> list[dict]:
             rows.append(r)
             print(f"  S1 {prec}: {r['particle_steps_per_s'] / 1e6:6.2f} M particle-steps/s, cost vs mixed "
                   f"{r['cost_vs_S1']}", flush=True)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     path = out / ("throughput_quick.csv" if quick else "throughput.csv")
     write_csv(path, rows)
     with open(path.with_suffix(".txt"), "w") as f:

@@ -1,5 +1,5 @@
 """`python -m taichimyxo bench throughput`: particle-steps per second of scenes at the paper's size and at multiples of
-its area, on the CPU or a GPU, and the wall time a full 6 h S3 would take (issue 16).
+its area, on the CPU or a GPU, and the wall time a full 6 h S3 would take.
 
     python -m taichimyxo bench throughput [--arch cpu|cuda] [--sizes 1,4,16] [--scenes S1,S3,S11] [--steps N]
                                           [--warm N] [--out DIR]
@@ -10,7 +10,7 @@ Each (scene, size) builds its simulation, runs `warm` steps (compiling the kerne
 and times `steps` more (time_steps): placement, compiling and the warm steps are reported apart (setup_s), never in
 the rate.
 
-Projection of a full 6 h S3 at paper scale (the README's method): its 10.8 M steps (6 h at S3's step) at the cost
+Projection of a full 6 h S3 at paper scale (docs/performance.md): its 10.8 M steps (6 h at S3's step) at the cost
 per particle-step measured at S3's start (sparse: cells far apart) and at S11's (dense: aligned at area fraction ~1,
 every cell in contact), each scaled to S3's particles: the range between a run that stayed as sparse as its start
 and one as dense as S11. Written with the rows to throughput.csv and throughput.json in --out; rows already there
@@ -65,19 +65,22 @@ def time_steps(sim, steps: int, warm: int) -> dict:
             "particle_steps_per_s": sim.n_p * steps / wall, "rebuilds": sim.rebuilds - r0}
 
 
-def measure(name: str, area: float, steps: int, warm: int, run: dict | None = None) -> dict:
-    """One row: scene `name` at `area` times its area on the arch Taichi runs on (initialised by the caller)."""
+def measure(name: str, area: float, steps: int, warm: int, run: dict | None = None, start=None,
+            state: str = "start") -> dict:
+    """One row: scene `name` at `area` times its area on the arch Taichi runs on (initialised by the caller).
+    start: (positions, engine_direction) to begin from instead of the scene's start, a benchmark state named by
+    `state` (benchmarks/states.py)."""
     from .simulation import Simulation
     sc = scaled_scene(name, area, run)
     t0 = time.perf_counter()
-    sim = Simulation(sc)
+    sim = Simulation(sc) if start is None else Simulation(sc, positions=start[0], engine_direction=start[1])
     try:
         sim.run(warm)                                 # compiles the step, settles the list
         import taichi as ti
         ti.sync()
         setup = time.perf_counter() - t0              # placement, fields, compiling, warm steps
         t = time_steps(sim, steps, 0)
-        row = {"scene": name, "area": area, "box_um": f"{sc.box[0]:g}x{sc.box[1]:g}", "cells": sc.n_cells,
+        row = {"scene": name, "state": state, "area": area, "box_um": f"{sc.box[0]:g}x{sc.box[1]:g}", "cells": sc.n_cells,
                "particles": sim.n_p, "precision": sc.precision, "integrator": sc.integrator, "dt_ms": sc.dt * 1e3,
                "steps": steps, "wall_s": t["wall_s"], "ms_per_step": t["ms_per_step"],
                "steps_per_s": round(steps / t["wall_s"], 1) if t["wall_s"] else float("inf"),
