@@ -10,7 +10,7 @@ Each (scene, size) builds its simulation, runs `warm` steps (compiling the kerne
 and times `steps` more (time_steps): placement, compiling and the warm steps are reported apart (setup_s), never in
 the rate.
 
-Projection of a full 6 h S3 at paper scale (docs/performance.md): its 10.8 M steps (6 h at S3's step) at the cost
+Projection of a full 6 h S3 at paper scale (docs/performance.md): its 5.4 M steps (6 h at S3's 4 ms step) at the cost
 per particle-step measured at S3's start (sparse: cells far apart) and at S11's (dense: aligned at area fraction ~1,
 every cell in contact), each scaled to S3's particles: the range between a run that stayed as sparse as its start
 and one as dense as S11. Written with the rows to throughput.csv and throughput.json in --out; rows already there
@@ -80,8 +80,8 @@ def measure(name: str, area: float, steps: int, warm: int, run: dict | None = No
         ti.sync()
         setup = time.perf_counter() - t0              # placement, fields, compiling, warm steps
         t = time_steps(sim, steps, 0)
-        row = {"scene": name, "state": state, "area": area, "box_um": f"{sc.box[0]:g}x{sc.box[1]:g}", "cells": sc.n_cells,
-               "particles": sim.n_p, "precision": sc.precision, "integrator": sc.integrator, "dt_ms": sc.dt * 1e3,
+        row = {"scene": name, "state": state, "area": area, "box_um": f"{sc.box[0]:g}x{sc.box[1]:g}",
+               "cells": sc.n_cells, "particles": sim.n_p, "precision": sc.precision, "integrator": sc.integrator, "dt_ms": sc.dt * 1e3,
                "steps": steps, "wall_s": t["wall_s"], "ms_per_step": t["ms_per_step"],
                "steps_per_s": round(steps / t["wall_s"], 1) if t["wall_s"] else float("inf"),
                "particle_steps_per_s": round(t["particle_steps_per_s"]),
