@@ -94,7 +94,8 @@ def render_frame(frame, color: str = "speed", size=(1920, 1080), **options):
 def render_movie(trajectory, out=None, *, color: str = "speed", size=(1920, 1080), fps: float = 10.0,
                  every: int = 1, vmin=None, vmax=None, progress: bool = True) -> tuple[str, str, int]:
     """A GSD trajectory to an MP4 movie with a PNG panel of its last frame beside it, without simulating.
-    out: default next to the trajectory, named after the colouring (S3.mp4 for speed, S3.strain.mp4, ...).
+    out: a folder (created if missing) or a movie path ending in .mp4; by default the trajectory's folder. In a
+    folder the movie is named after the trajectory and the colouring (S3.mp4 for speed, S3.strain.mp4, ...).
     Returns (movie, panel, frames). A file that is not a trajectory of cells, or color="strain" without logged
     strain, is a TrajectoryError; a bad colour range a RenderOptionError; both before anything is written."""
     from .trajectory import check_trajectory
@@ -110,23 +111,32 @@ def render_movie(trajectory, out=None, *, color: str = "speed", size=(1920, 1080
     except ValueError as e:
         raise RenderOptionError(str(e)) from None
     suffix = "" if color == "speed" else f".{color}"     # each colouring its own file
-    out = os.fspath(out) if out else os.path.splitext(trajectory)[0] + suffix + ".mp4"
-    from .scene_run import check_output_dir
-    check_output_dir(os.path.dirname(os.path.abspath(out)))
+    from .outdir import check_out_folder
+    out = os.fspath(out) if out else None
+    if out and out.lower().endswith(".mp4") and not os.path.isdir(out):
+        check_out_folder(os.path.dirname(os.path.abspath(out)))
+    else:
+        folder = check_out_folder(out or os.path.dirname(os.path.abspath(trajectory)))
+        out = os.path.join(folder, os.path.splitext(os.path.basename(trajectory))[0] + suffix + ".mp4")
     png = os.path.splitext(out)[0] + ".png"
     n = render_trajectory(trajectory, out, color=color, size=size, fps=fps, every=every, png_path=png, vmin=vmin,
                           vmax=vmax, progress=progress)
     return out, png, n
 
 
-def analyze(trajectory, out_dir=None, *, every: int = 1, v_b: float | None = None, plots: bool = True) -> dict:
+def analyze(trajectory, out_dir=None, *, every: int = 1, v_b: float | None = None, plots: bool = True,
+            measures: bool = False) -> dict:
     """Aggregates, rotation and speed profiles of a GSD trajectory (what ``python -m taichimyxo analyze`` does):
     the summary dict, also written as JSON (and PNG plots) next to the trajectory or into out_dir. A file that is
-    not a trajectory of cells is a TrajectoryError before anything is written."""
+    not a trajectory of cells is a TrajectoryError before anything is written. measures: also defects, cluster
+    sizes, correlations, MSD and reversal events (taichimyxo.analysis.measures; ``analyze --measures``)."""
     from .trajectory import check_trajectory
     check_trajectory(os.fspath(trajectory))
+    from .outdir import check_out_folder
+    check_out_folder(os.fspath(out_dir) if out_dir else os.path.dirname(os.path.abspath(os.fspath(trajectory))))
     from .analysis import analyze as analyze_trajectory
-    return analyze_trajectory(os.fspath(trajectory), out_dir=out_dir, every=every, v_b=v_b, plots=plots)
+    return analyze_trajectory(os.fspath(trajectory), out_dir=out_dir, every=every, v_b=v_b, plots=plots,
+                              measures=measures)
 
 
 def claims(trajectories, out_dir=None, *, every: int = 1, v_b: float | None = None, plots: bool = True,
@@ -143,6 +153,11 @@ def claims(trajectories, out_dir=None, *, every: int = 1, v_b: float | None = No
     paths = [os.fspath(p) for p in trajectories]
     if not paths:
         raise TrajectoryError("claims needs at least one trajectory")
+    seen = {}
+    for p in paths:          # one run counted twice would weigh twice in every claim it enters
+        if os.path.realpath(p) in seen:
+            raise TrajectoryError(f"claims: {p} is given twice (also as {seen[os.path.realpath(p)]}); give each run once")
+        seen[os.path.realpath(p)] = p
     for p in paths:
         check_trajectory(p)
     check_output_dir(os.fspath(out_dir) if out_dir else ".")

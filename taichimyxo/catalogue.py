@@ -5,7 +5,7 @@ import os
 import re
 from pathlib import Path
 
-from .schema import SceneError
+from .schema import SceneError, did_you_mean
 
 
 def scenes_dir() -> Path:
@@ -41,5 +41,33 @@ def resolve_path(name_or_path: str) -> Path:
         return p
     cand = SCENES_DIR / f"{name_or_path}.toml"
     if not cand.is_file():
-        raise SceneError(f"unknown scene {name_or_path!r}; available: {', '.join(available_scenes())}")
+        raise SceneError(f"unknown scene {name_or_path!r}{did_you_mean(name_or_path, available_scenes())}; available: "
+                         f"{', '.join(available_scenes())}")
     return cand
+
+
+def sweeps_dir() -> Path:
+    """Where the sweep files are: inside the package in a wheel (pyproject.toml maps sweeps/ to taichimyxo/sweeps),
+    at the top of the clone otherwise."""
+    here = Path(__file__).resolve().parent
+    for d in (here / "sweeps", here.parent / "sweeps"):
+        if d.is_dir() and any(d.glob("*.toml")):
+            return d
+    return here / "sweeps"
+
+
+def available_sweeps() -> list[str]:
+    d = sweeps_dir()
+    return sorted(p.stem for p in d.glob("*.toml")) if d.is_dir() else []
+
+
+def resolve_sweep(name_or_path) -> Path:
+    """A sweep file by path, or by name among the shipped ones (`sweep example`); a path that exists wins."""
+    p = Path(name_or_path)
+    if p.is_file() or p.suffix == ".toml" or os.sep in str(name_or_path):
+        return p
+    cand = sweeps_dir() / f"{name_or_path}.toml"
+    if cand.is_file():
+        return cand
+    raise SceneError(f"unknown sweep {str(name_or_path)!r}{did_you_mean(str(name_or_path), available_sweeps())}; "
+                     f"shipped: {', '.join(available_sweeps())} (or give a .toml path)")

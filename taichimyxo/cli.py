@@ -10,12 +10,12 @@ import os
 import sys
 
 from .scene import SCHEMA, Scene, SceneError, available_scenes, parse_set, to_toml, toml_value
+from .cli_sweep import (EXIT_INTERRUPTED, EXIT_RUN_FAILED, cmd_sweep, executor_arguments,  # noqa: F401
+                        executor_options, positive_int)
 from .trajectory import TrajectoryError
 
-EXIT_RUN_FAILED = 1
 EXIT_BAD_INPUT = 2
 EXIT_INVARIANT = 3
-EXIT_INTERRUPTED = 130
 
 
 def _fail(msg: str) -> int:
@@ -30,16 +30,6 @@ class _Parser(argparse.ArgumentParser):
 
 
 ARCHES = ("cpu", "cuda", "vulkan", "metal", "gpu")       # as backend.init accepts them
-
-
-def _positive_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"{v} must be at least 1")
-    return v
 
 
 def version() -> str:
@@ -74,11 +64,16 @@ def _build_parser() -> argparse.ArgumentParser:
                    help="override any scene key by its dotted name, e.g. --set guiding.kind=active")
     s.add_argument("--arch", default="cpu", choices=ARCHES,
                    help="cpu (default), cuda, vulkan, metal, gpu; unavailable GPUs fall back to cpu")
-    s.add_argument("--threads", type=_positive_int, help="CPU threads (default: all cores)")
-    s.add_argument("--resume", action="store_true", help="continue an interrupted run from its checkpoint")
+    s.add_argument("--threads", type=positive_int, help="CPU threads (default: all cores)")
+    s.add_argument("--resume", action="store_true", help="continue an unfinished run in --out from its checkpoint")
+    s.add_argument("--overwrite", action="store_true", help="start again over a run already in --out (without it, a "
+                   "folder holding an unfinished run, or a finished one of other parameters, is refused)")
     s.add_argument("--force", action="store_true",
                    help="run even if the time step exceeds the stability limit; the invariants are still checked at "
                         "every frame (a run that breaks them stops with exit status 3)")
+    s.add_argument("--no-rollback", action="store_true",
+                   help="stop at the first broken invariant (exit status 3) instead of redoing the stretch since "
+                        "the last in-memory snapshot at half the step")
     s.add_argument("--show", action="store_true",
                    help="print the resolved scene as TOML (every key, after --set and --preview) and exit")
     s.add_argument("--no-movie", action="store_true", help="trajectory and summary only")
@@ -94,23 +89,26 @@ def _build_parser() -> argparse.ArgumentParser:
                         "direction) or axis angle (mod 180°, cyclic)")
     r.add_argument("--vmin", type=float, help="colour range low end (speed µm/min, default 0; strain J, 1e-21)")
     r.add_argument("--vmax", type=float, help="colour range high end (speed µm/min, default 16; strain J, 1e-17)")
-    r.add_argument("--out", help="output .mp4 (default: next to the trajectory)")
+    r.add_argument("--out", help="output folder (created if missing; the movie is named after the trajectory and "
+                                 "the colouring), or a movie path ending in .mp4 (default: next to the trajectory)")
     r.add_argument("--fps", type=float, default=10.0)
     r.add_argument("--size", default="1920x1080")
     r.add_argument("--every", type=int, default=1, help="render every K-th frame")
 
     a = sub.add_parser("analyze", help="aggregates, rotation and speed profiles from a trajectory")
     a.add_argument("trajectory", help="GSD trajectory written by taichimyxo")
-    a.add_argument("--out", help="output folder (default: next to the trajectory)")
+    a.add_argument("--out", help="output folder, created if missing (default: next to the trajectory)")
     a.add_argument("--every", type=int, default=1, help="analyse every K-th frame")
     a.add_argument("--v-b", type=float, default=None, help="free-cell speed, µm/min (default: from the scene, or 4)")
     a.add_argument("--no-plots", action="store_true", help="write the JSON summary only")
+    a.add_argument("--measures", action="store_true", help="also defects, cluster-size fits, correlations, MSD and "
+                   "reversal events (docs/measures.md)")
 
     c = sub.add_parser("claims", help="the paper's claims measured on runs, one table (markdown, CSV, JSON + plots)")
     c.add_argument("trajectories", nargs="+", metavar="RUN.gsd", help="GSD trajectories written by taichimyxo; each "
                    "run's guiding (non-guided, passive, active, adhesion, slime) is read from the scene it stores")
     c.add_argument("--out", help="output folder for claims.md/.csv/.json and claims.*.png (default: current folder)")
-    c.add_argument("--every", type=_positive_int, default=1, help="analyse every K-th frame")
+    c.add_argument("--every", type=positive_int, default=1, help="analyse every K-th frame")
     c.add_argument("--v-b", type=float, default=None, help="free-cell speed, µm/min (default: each run's scene)")
     c.add_argument("--no-plots", action="store_true", help="the tables only")
 
@@ -119,14 +117,17 @@ def _build_parser() -> argparse.ArgumentParser:
     v.add_argument("--only", help="comma-separated scene names as `list` shows them, e.g. S3,S8,S2FigA")
     v.add_argument("--out", default="videos")
     v.add_argument("--arch", default="cpu", choices=ARCHES)
-    _executor_arguments(v, "videos at a time (default 1: one after another, as before)")
+    executor_arguments(v, "videos at a time (default 1: one after another, as before)")
 
     w = sub.add_parser("sweep", help="a grid of scene keys x seeds from a sweep file, in parallel here or on a "
                                      "Slurm cluster; one table of outcomes")
-    w.add_argument("file", help="sweep file (TOML), e.g. sweeps/example.toml; its format: README, \"Sweeps\"")
+    w.add_argument("file", help="sweep file (TOML), or the name of a shipped one, e.g. example; its format: README, "
+                                "\"Sweeps\"")
+    w.add_argument("--resume", action="store_true", help="continue the sweep's unfinished runs in --out")
+    w.add_argument("--overwrite", action="store_true", help="start the sweep's runs in --out again")
     w.add_argument("--out", help="results folder (default sweeps-results/NAME, NAME the sweep's)")
     w.add_argument("--dry-run", action="store_true", help="validate, list the points and their folders; run nothing")
-    _executor_arguments(w, "runs at a time (default: the number of cores), each on one thread")
+    executor_arguments(w, "runs at a time (default: the number of cores), each on one thread")
 
     b = sub.add_parser("bench", help="measure the simulation's speed (taichimyxo/bench.py)")
     bsub = b.add_subparsers(dest="bench", required=True, parser_class=_Parser)
@@ -136,46 +137,15 @@ def _build_parser() -> argparse.ArgumentParser:
     t.add_argument("--sizes", default="1,4,16", help="multiples of each scene's area (default 1,4,16; cells scale "
                                                      "with the area)")
     t.add_argument("--scenes", default="S1,S3,S11", help="comma-separated scene names (default S1,S3,S11)")
-    t.add_argument("--steps", type=_positive_int, default=200, help="timed steps per measurement (default 200)")
+    t.add_argument("--steps", type=positive_int, default=200, help="timed steps per measurement (default 200)")
     t.add_argument("--warm", type=int, default=50, help="untimed steps first: compiling, list settling (default 50)")
-    t.add_argument("--threads", type=_positive_int, help="CPU threads (default: all cores)")
+    t.add_argument("--threads", type=positive_int, help="CPU threads (default: all cores)")
     t.add_argument("--out", default="benchmarks-results",
                    help="folder for throughput.csv / .json, merged with rows already there (default "
                         "benchmarks-results/)")
+    from .figures.command import add_parser as add_figures_parser
+    add_figures_parser(sub, executor_arguments)
     return p
-
-
-EXECUTOR_NAMES = ("local", "slurm")           # taichimyxo.sweep.driver.EXECUTORS (not imported: keep the CLI light)
-
-
-# --executor slurm's options on the command line: (flag, [slurm] key, type, metavar, help);
-# taichimyxo.sweep.slurm.OPTIONS has them all (the sweep file's [slurm] table takes any of those)
-SLURM_FLAGS = (("--partition", "partition", str, "NAME", "partition (default: the cluster's default)"),
-               ("--account", "account", str, "NAME", "account to charge"),
-               ("--time-min", "time_min", _positive_int, "MIN", "time limit per run, minutes (default 60); a run "
-                "that needs longer is requeued and resumes from its checkpoint"),
-               ("--cpus-per-task", "cpus_per_task", _positive_int, "N", "CPUs (Taichi threads) per run (default 1)"),
-               ("--mem-gb", "mem_gb", float, "GB", "memory per run, GB (default 4)"))
-
-
-def _executor_arguments(p, jobs_help: str) -> None:
-    p.add_argument("--executor", default="local", choices=EXECUTOR_NAMES,
-                   help="local: processes on this machine (default); slurm: jobs on a Slurm cluster")
-    p.add_argument("--jobs", type=_positive_int, help=jobs_help + "; with slurm: jobs running at once (default: "
-                                                              "as many as the cluster starts)")
-    g = p.add_argument_group("--executor slurm", "(override the sweep file's [slurm] table)")
-    for flag, key, kind, metavar, text in SLURM_FLAGS:
-        g.add_argument(flag, dest=f"slurm_{key}", type=kind, metavar=metavar, help=text)
-
-
-def executor_options(args) -> dict:
-    """The executor's options given on the command line (they update the sweep file's [local] / [slurm] table)."""
-    given = {key: getattr(args, f"slurm_{key}") for _, key, _, _, _ in SLURM_FLAGS
-             if getattr(args, f"slurm_{key}", None) is not None}
-    if given and args.executor != "slurm":
-        flags = [f for f, key, _, _, _ in SLURM_FLAGS if key in given]
-        raise SceneError(f"{', '.join(flags)}: only with --executor slurm")
-    return given
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -214,27 +184,28 @@ def load_scene_from_args(args) -> Scene:
 
 
 def cmd_list() -> int:
+    from .figures.specs import scene_panels
+    panels = scene_panels()                 # which composite of `figures` each scene's run is a panel of
     for name in available_scenes():
         try:
             sc = Scene.load(name)
             fig = f" [{sc.paper_figure}]" if sc.paper_figure else ""
-            print(f"{name:<12} {sc.title}{fig}")
+            print(f"{name:<12} {sc.title}{fig}{panels.get(name, '')}")
         except SceneError as e:
             print(f"{name:<12} (invalid: {e})")
     return 0
 
 
 def cmd_keys() -> int:
-    """Three aligned columns: the dotted key, its default, its meaning (units are in the key names)."""
-    rows = [(f"{sec}.{k}", toml_value(default), doc) for sec, keys in SCHEMA.items()
+    """Four aligned columns: the dotted key, its default, the values allowed, its meaning (units are in the key
+    names)."""
+    from .schema import allowed
+    rows = [(f"{sec}.{k}", toml_value(default), allowed(check) or "-", doc) for sec, keys in SCHEMA.items()
             for k, (typ, default, check, doc) in keys.items()]
-    wk = max(len(r[0]) for r in rows)
-    wd = max(len(r[1]) for r in rows)
-    print(f"{'key':<{wk}}  {'default':<{wd}}  meaning")
-    for sec in SCHEMA:
-        for key, default, doc in rows:
-            if key.split(".")[0] == sec:
-                print(f"{key:<{wk}}  {default:<{wd}}  {doc}")
+    wk, wd, wa = (max(len(r[i]) for r in rows) for i in range(3))
+    print(f"{'key':<{wk}}  {'default':<{wd}}  {'allowed':<{wa}}  meaning")
+    for key, default, allow, doc in rows:
+        print(f"{key:<{wk}}  {default:<{wd}}  {allow:<{wa}}  {doc}")
     return 0
 
 
@@ -246,7 +217,11 @@ def cmd_scene(args) -> int:
     from .api import run_scene
     from .progress import duration
     summary = run_scene(sc, out_dir=args.out, arch=args.arch, resume=args.resume, progress=not args.quiet,
-                        threads=args.threads)
+                        threads=args.threads, rollback=not args.no_rollback, overwrite=args.overwrite)
+    if summary.get("already_complete"):
+        print(f"{sc.name}: already complete in {args.out} ({sc.name}.json); nothing changed (--overwrite runs it "
+              f"again)")
+        return 0
     if summary.get("status") == "interrupted":
         print(f"taichimyxo: {sc.name} interrupted at {duration(summary['simulated_seconds'])} simulated; files closed, "
               f"checkpoint {summary['files'].get('checkpoint')}; continue with --resume", file=sys.stderr)
@@ -296,7 +271,8 @@ def cmd_render(args) -> int:
 def cmd_analyze(args) -> int:
     from .analysis import format_summary
     from .api import analyze
-    summary = analyze(args.trajectory, out_dir=args.out, every=args.every, v_b=args.v_b, plots=not args.no_plots)
+    summary = analyze(args.trajectory, out_dir=args.out, every=args.every, v_b=args.v_b, plots=not args.no_plots,
+                      measures=args.measures)
     print(format_summary(summary))
     print(f"wrote {summary['json']}" + "".join(f"\nwrote {p}" for p in summary["plots"]))
     return 0
@@ -319,38 +295,6 @@ def cmd_videos(args) -> int:
                       executor=args.executor, jobs=jobs, options=executor_options(args))
 
 
-def cmd_sweep(args) -> int:
-    from .progress import duration
-    from .sweep import run_sweep
-    res = run_sweep(args.file, executor=args.executor, jobs=args.jobs, out=args.out, dry_run=args.dry_run,
-                    options=executor_options(args))
-    sw, pts = res["sweep"], res["points"]
-    combos = len(pts) // max(1, len(sw.seeds))
-    over = f"{combos} grid points of {', '.join(sw.swept_keys)} x " if sw.swept_keys else ""
-    seeds = f"{len(sw.seeds)} seed{'s' if len(sw.seeds) > 1 else ''}"
-    hours = sorted({p.scene.hours for p, _, _ in pts})
-    each = f"{duration(hours[0] * 3600)} simulated each" if len(hours) == 1 else \
-        f"{duration(hours[0] * 3600)} to {duration(hours[-1] * 3600)} simulated"
-    print(f"{sw.name}: {len(pts)} runs ({over}{seeds}), {each}, in {res['root']}")
-    if args.dry_run:
-        w = max(len(p.name) for p, _, _ in pts)
-        for p, d, st in pts:
-            print(f"  {st:<11} {p.name:<{w}}  {d}")
-        return 0
-    c = res["counts"]
-    print(f"{sw.name}: {c['completed']} completed, {c['skipped']} done before, {c['failed']} failed"
-          + (f", {c['interrupted'] + c['not started']} interrupted or not started" if c["interrupted"] +
-             c["not started"] else ""))
-    for d, r in res["results"].items():
-        if r.get("status") == "failed":
-            print(f"  failed {r.get('name')}: {r.get('error')} (log: {os.path.join(d, 'run.log')})")
-    print(f"table {res['csv']}" + "".join(f"\nplot {p}" for p in res["plots"]))
-    if c["interrupted"] or c["not started"]:
-        print(f"taichimyxo: {sw.name} interrupted; run the same command again to continue", file=sys.stderr)
-        return EXIT_INTERRUPTED
-    return EXIT_RUN_FAILED if c["failed"] else 0
-
-
 def cmd_bench(args) -> int:
     from .backend import BackendError
     from .bench import parse_sizes, throughput
@@ -361,6 +305,8 @@ def cmd_bench(args) -> int:
     scenes = [n.strip() for n in args.scenes.split(",") if n.strip()]
     for name in scenes:
         Scene.load(name)                   # an unknown scene: one line, exit 2, before anything is measured
+    from .outdir import check_out_folder
+    check_out_folder(args.out)
     try:
         throughput(args.arch, sizes, scenes, args.steps, max(0, args.warm), args.out, threads=args.threads)
     except BackendError as e:
@@ -378,7 +324,11 @@ def _catch_ctrl_c() -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = _build_parser().parse_args(argv)
+    parser = _build_parser()
+    if not (sys.argv[1:] if argv is None else argv):
+        parser.print_help(sys.stderr)       # no command: the commands, each with what it does
+        return EXIT_BAD_INPUT
+    args = parser.parse_args(argv)
     _catch_ctrl_c()
     try:
         if args.cmd == "list":
@@ -399,6 +349,8 @@ def main(argv: list[str] | None = None) -> int:
             return cmd_sweep(args)
         if args.cmd == "bench":
             return cmd_bench(args)
+        if args.cmd == "figures":
+            return args.figures_main(args, executor_options(args))
     except (SceneError, TrajectoryError) as e:
         return _fail(str(e))
     except KeyboardInterrupt:

@@ -3,9 +3,15 @@ status line (in place on a terminal, a line per interval elsewhere), `Progress` 
 total, steps per second, time left)."""
 from __future__ import annotations
 
+import json
 import math
+import os
 import sys
 import time
+from pathlib import Path
+
+# what compiling a scene's kernels the first time takes on a 2-core machine, roughly (docs/performance.md)
+FIRST_COMPILE_S = 30.0
 
 
 def duration(seconds: float) -> str:
@@ -57,24 +63,37 @@ class Progress:
     """One status line on stderr: simulated time of the total, one rate (steps per second of wall time in this
     session) and the time left at that rate. On a terminal it is redrawn in place every second; otherwise (a log
     file, a pipe) it is a plain line when the run starts, every 30 s, and at the end, so a log grows by a short line
-    per half minute instead of by one endless carriage-return line."""
+    per half minute instead of by one endless carriage-return line.
+
+    The first chunk of steps compiles the kernels, so the rate is measured from its end: until then the line says
+    what is happening (`starting`, e.g. 'compiling kernels (first run of this scene, ~30 s)') and gives no time
+    left."""
 
     def __init__(self, name: str, total_steps: int, dt: float, start_step: int, stream=None,
-                 interval_s: float | None = None):
+                 interval_s: float | None = None, starting: str = "starting"):
         self.status = StatusLine(stream, interval_s, file_interval_s=30.0)
         self.name, self.total, self.dt, self.start = name, total_steps, dt, start_step
+        self.starting = starting
         self.t0 = time.perf_counter()
+        self.measured_from: tuple[int, float] | None = None     # (step, time) at the end of the first chunk
+
+    def first_chunk_seconds(self) -> float | None:
+        return None if self.measured_from is None else self.measured_from[1] - self.t0
 
     def line(self, step: int) -> str:
-        el = time.perf_counter() - self.t0
-        done = step - self.start
-        rate = done / el if el > 0 and done > 0 else 0.0
-        left = duration((self.total - step) / rate) if rate > 0 else "?"
-        pct = 100.0 * step / max(self.total, 1)
-        return (f"{self.name}: {duration(step * self.dt)} of {duration(self.total * self.dt)} simulated "
-                f"({pct:.0f} %), {rate:.0f} steps/s, {left} left")
+        where = (f"{self.name}: {duration(step * self.dt)} of {duration(self.total * self.dt)} simulated "
+                 f"({100.0 * step / max(self.total, 1):.0f} %)")
+        if self.measured_from is None:
+            return f"{where}, {self.starting} ..."
+        s0, t0 = self.measured_from
+        if step <= s0:
+            return f"{where}, measuring the step rate ..."
+        rate = (step - s0) / max(time.perf_counter() - t0, 1e-9)
+        return f"{where}, {rate:.0f} steps/s, {duration((self.total - step) / rate)} left"
 
     def update(self, step: int, force: bool = False) -> None:
+        if self.measured_from is None and step > self.start:
+            self.measured_from = (step, time.perf_counter())
         if self.status.due(force):
             self.status.show(self.line(step))
 
@@ -83,3 +102,49 @@ class Progress:
         if self.status.tty:
             self.status.stream.write("\n")
             self.status.stream.flush()
+
+
+def compile_record() -> Path:
+    """Where the first chunk's wall time of each scene configuration is kept between runs (the user's cache)."""
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "taichimyxo" / "first_chunk_s.json"
+
+
+def configuration_key(scene) -> str:
+    """What the compiled kernels depend on: everything but the seed, the duration and the outputs."""
+    import hashlib
+    d = {k: v for k, v in scene.raw.items() if k not in ("output", "scene", "preview")}
+    d["run"] = {k: v for k, v in d["run"].items() if k not in ("seed", "hours")}
+    return hashlib.sha1(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def starting_note(scene) -> str:
+    """What the first line says while the first chunk runs: compiling (first run of this configuration here) or
+    loading compiled kernels, with the time it took last."""
+    try:
+        record = json.loads(compile_record().read_text())
+    except (OSError, ValueError):
+        record = {}
+    last = record.get(configuration_key(scene)) if isinstance(record, dict) else None
+    if isinstance(last, (int, float)):
+        return f"starting (kernels compiled before; the first steps took {duration(last)} last time)"
+    longest = max([v for v in record.values() if isinstance(v, (int, float))] + [FIRST_COMPILE_S]) \
+        if isinstance(record, dict) else FIRST_COMPILE_S
+    return f"compiling kernels (first run of this scene, ~{longest:.0f} s)"
+
+
+def remember_first_chunk(scene, seconds: float) -> None:
+    """Keep the first chunk's wall time for the next run's first line; a cache that cannot be written is skipped."""
+    path = compile_record()
+    try:
+        record = json.loads(path.read_text())
+        record = record if isinstance(record, dict) else {}
+    except (OSError, ValueError):
+        record = {}
+    record[configuration_key(scene)] = round(float(seconds), 1)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+        tmp.write_text(json.dumps(record))
+        os.replace(tmp, path)
+    except OSError:
+        pass

@@ -71,8 +71,8 @@ class Scene:
                 scale("population", "cells", max(1, round(raw["population"]["cells"] * s * s)))
             scale("run", "hours", min(raw["run"]["hours"], raw["preview"]["hours"]))
             scale("output", "frame_interval_min", raw["preview"]["frame_interval_min"])
-            scale("output", "video_width", min(raw["output"]["video_width"], 640))
-            scale("output", "video_height", min(raw["output"]["video_height"], 480))
+            scale("output", "video_width", min(raw["output"]["video_width"], 1280))      # a square box: 722 x 840
+            scale("output", "video_height", min(raw["output"]["video_height"], 840))
             raw["scene"]["name"] += "-preview" if not raw["scene"]["name"].endswith("-preview") else ""
         sc = cls(raw=raw, source=where, preview_scaled=scaled)
         sc.validate()

@@ -16,12 +16,13 @@ Outputs in the output folder, for scene NAME:
 from __future__ import annotations
 
 import json
-import os
 import sys
 import time
 from pathlib import Path
 
 from .driver import drive
+from .event_log import EventLog
+from .outdir import OutputError, check_out_folder, outputs, plan_run, read_summary, remove_run  # noqa: F401
 from .progress import duration
 from .scene import Scene, SceneError
 from .triggers import Periodic, WallClock
@@ -29,26 +30,9 @@ from .writers import (SUMMARY_VERSION, Checkpoint, FigurePanel, InvariantCheck, 
                       Trajectory, read_checkpoint, scene_render_options)
 
 
-class OutputError(SceneError):
-    pass
-
-
 def check_output_dir(out_dir: str) -> Path:
-    """Create the folder if needed and prove it is writable, before any long work starts."""
-    p = Path(out_dir)
-    try:
-        p.mkdir(parents=True, exist_ok=True)
-        probe = p / f".taichimyxo-write-test-{os.getpid()}"
-        probe.write_bytes(b"ok")
-        probe.unlink()
-    except OSError as e:
-        raise OutputError(f"output folder {out_dir} cannot be written: {e.strerror or e}") from None
-    return p
-
-
-def outputs(out: Path, name: str) -> dict:
-    return {k: out / f"{name}.{ext}" for k, ext in
-            (("mp4", "mp4"), ("png", "png"), ("gsd", "gsd"), ("json", "json"), ("ckpt", "ckpt.npz"))}
+    """Create the folder if needed and prove it is writable, before any long work starts (taichimyxo.outdir)."""
+    return check_out_folder(out_dir)
 
 
 def find_reusable_trajectory(scene: Scene, out: Path) -> tuple[Path, int] | None:
@@ -102,15 +86,24 @@ def _placement_progress(scene):
 
 def run_scene(scene: Scene, out_dir: str = "videos", arch: str = "cpu", resume: bool = False,
               progress: bool = True, threads: int | None = None, reuse: bool = True,
-              checkpoint_every_s: float = 300.0, stop_after_steps: int | None = None) -> dict:
+              checkpoint_every_s: float = 300.0, stop_after_steps: int | None = None, rollback: bool = True,
+              overwrite: bool = False) -> dict:
     """Run `scene`, writing NAME.mp4/.png/.gsd/.json into out_dir. Returns the summary dict.
+    An earlier run in out_dir (taichimyxo.outdir.plan_run): an unfinished one continues only with resume and is
+    replaced only with overwrite; a finished one of the same scene is returned as it is, with "already_complete".
     stop_after_steps (tests): behave as if interrupted after that many steps.
-    A run that breaks an invariant returns with status "failed" (files closed, checkpoint written)."""
+    rollback: a chunk that breaks an invariant is redone at split steps (taichimyxo/driver.py); a run that breaks one
+    at every split, or at once without rollback, returns with status "failed" (files closed, checkpoint written)."""
     # what the run needs, before anything is placed, allocated or written
     from .resources import check_resources
+    start = plan_run(scene, out_dir, resume=resume, overwrite=overwrite)
+    if start == "complete":
+        return {**read_summary(outputs(Path(out_dir), scene.name)["json"]), "already_complete": True}
     check_resources(scene)
     out = check_output_dir(out_dir)
     files = outputs(out, scene.name)
+    if start == "overwrite":
+        remove_run(files)
 
     if reuse and not resume:
         found = find_reusable_trajectory(scene, out)
@@ -119,8 +112,6 @@ def run_scene(scene: Scene, out_dir: str = "videos", arch: str = "cpu", resume: 
 
     ckpt = None
     if resume:
-        if not files["ckpt"].is_file():
-            raise SceneError(f"--resume: no checkpoint {files['ckpt']} to resume from")
         try:
             ckpt = read_checkpoint(files["ckpt"], scene)
         except ValueError as e:
@@ -155,7 +146,7 @@ def run_scene(scene: Scene, out_dir: str = "videos", arch: str = "cpu", resume: 
         # the movie so far, re-rendered from the trajectory
         movie.append_frames(fr for fr in read_frames(str(files["gsd"])) if fr.step % movie_every == 0)
 
-    drive(sim, scene.steps - sim.step_count, attached, stop_after_steps=stop_after_steps)
+    drive(sim, scene.steps - sim.step_count, attached, stop_after_steps=stop_after_steps, rollback=rollback)
     summary = next(w for w in attached if isinstance(w, Summary)).summary
     sim.close()
     return summary
@@ -174,6 +165,7 @@ def scene_writers(scene: Scene, files: dict, *, resumed: bool = False, progress:
         attached.append(ProgressLine(scene.name, scene.steps))
     attached.append(Trajectory(files["gsd"], Periodic(steps=scene.trajectory_every_steps), final=True,
                                append=resumed))
+    attached.append(EventLog(files["gsd"], append=resumed))    # <run>.events.csv when cells reverse or guide
     if write_movie:
         size = scene.video_size
         attached.append(Movie(files["mp4"], Periodic(steps=scene.frame_every_steps), final=True, size=size,

@@ -106,12 +106,41 @@ SCHEMA: dict[str, dict[str, tuple]] = {
     "preview": {
         "scale": (_F, 0.25, ("range", 0.01, 1.0), "--preview: box side scaled by this (cells scale with area)"),
         "hours": (_F, 0.1, "pos", "--preview: simulated time, h"),
-        "frame_interval_min": (_F, 0.25, "pos", "--preview: minutes between frames"),
+        "frame_interval_min": (_F, 0.05, "pos", "--preview: minutes between frames (3 s: an aggregate turns a few "
+                                                "degrees a frame; a 6 min preview is a 12 s movie at 10 fps)"),
     },
 }
 
 # the stiffness names the paper uses
 STIFFNESS_NAMES = {1e-18: "very flexible", 1e-17: "flexible", 1e-16: "rigid", 1e-15: "very rigid"}
+
+
+def did_you_mean(word: str, choices) -> str:
+    """' (did you mean S3?)' for a near miss (case ignored), else ''."""
+    import difflib
+    choices = list(choices)
+    folded = {c.lower(): c for c in choices}
+    if word.lower() in folded:
+        return f" (did you mean {folded[word.lower()]}?)"
+    close = difflib.get_close_matches(word.lower(), list(folded), n=1, cutoff=0.6)
+    return f" (did you mean {folded[close[0]]}?)" if close else ""
+
+
+def all_keys() -> list[str]:
+    return [f"{sec}.{k}" for sec, keys in SCHEMA.items() for k in keys]
+
+
+def allowed(check) -> str:
+    """What a key's check allows, in words ('' when any value of its type goes)."""
+    if check == "pos":
+        return "> 0"
+    if check == "nonneg":
+        return ">= 0"
+    if isinstance(check, tuple) and check and check[0] == "range":
+        return f"{check[1]:g} to {check[2]:g}"
+    if isinstance(check, tuple):
+        return " | ".join(map(str, check))
+    return ""
 
 
 def defaults() -> dict:
@@ -145,19 +174,21 @@ def _check_value(sec: str, key: str, val):
         if not (check[1] <= val <= check[2]):
             raise SceneError(f"{name} = {val!r}: must be between {check[1]} and {check[2]}")
     elif isinstance(check, tuple) and val not in check:
-        raise SceneError(f"{name} = {val!r}: allowed values are {', '.join(map(str, check))}")
+        raise SceneError(f"{name} = {val!r}: allowed values are {', '.join(map(str, check))}"
+                         f"{did_you_mean(str(val), map(str, check))}")
     return val
 
 
 def merge(base: dict, over: dict, where: str) -> None:
     for sec, body in over.items():
         if sec not in SCHEMA:
-            raise SceneError(f"{where}: unknown section [{sec}]; allowed: {', '.join(SCHEMA)}")
+            raise SceneError(f"{where}: unknown section [{sec}]{did_you_mean(sec, SCHEMA)}; allowed: {', '.join(SCHEMA)}")
         if not isinstance(body, dict):
             raise SceneError(f"{where}: [{sec}] must be a table")
         for key, val in body.items():
             if key not in SCHEMA[sec]:
-                raise SceneError(f"{where}: unknown key {sec}.{key}; allowed in [{sec}]: {', '.join(SCHEMA[sec])}")
+                raise SceneError(f"{where}: unknown key {sec}.{key}{did_you_mean(key, SCHEMA[sec])}; allowed in [{sec}]: "
+                                 f"{', '.join(SCHEMA[sec])}")
             base[sec][key] = _check_value(sec, key, val)
 
 
@@ -173,7 +204,7 @@ def parse_set(items: list[str]) -> dict:
             raise SceneError(f"--set {key!r}: expected a dotted key SECTION.KEY, e.g. cell.k_a_N_m")
         sec, k = key.split(".")
         if sec not in SCHEMA or k not in SCHEMA[sec]:
-            raise SceneError(f"--set {key}: unknown key; see `python -m taichimyxo keys`")
+            raise SceneError(f"--set {key}: unknown key{did_you_mean(key, all_keys())}; see `python -m taichimyxo keys`")
         try:
             val = tomllib.loads(f"v = {raw.strip()}")["v"]
         except tomllib.TOMLDecodeError:
@@ -197,6 +228,7 @@ def to_toml(scene) -> str:
     if scene.preview_scaled:
         lines.append("# --preview scaled " + ", ".join(f"{k} (from {v!r})" for k, v in scene.preview_scaled.items()))
     notes = {("run", "dt_ms"): f"resolves to {scene.dt * 1e3:g} ms",
+             ("population", "cells"): f"resolves to {scene.n_cells} cells",
              ("output", "trajectory_interval_min"): f"resolves to "
              f"{scene.trajectory_every_steps * scene.dt / 60:g} min"}
     for sec, keys in SCHEMA.items():

@@ -73,8 +73,8 @@ def regenerate(preview: bool = False, only: str | None = None, out_dir: str = "v
         cmd = [sys.executable, "-m", "taichimyxo", "scene", name, "--out", str(out), "--arch", arch]
         if preview:
             cmd.append("--preview")
-        if (out / f"{sc.name}.ckpt.npz").is_file():
-            cmd.append("--resume")
+        # as `videos` always did: continue from a checkpoint, else make the video again
+        cmd.append("--resume" if (out / f"{sc.name}.ckpt.npz").is_file() else "--overwrite")
         print(f"[{i}/{len(todo)}] {sc.name}: {sc.title} "
               f"(elapsed {time.time() - t0:.0f} s)", flush=True)
         try:

@@ -199,6 +199,11 @@ def test_real_signal_closes_files_checkpoints_and_resumes_bit_for_bit(tmp_path, 
     assert n == K // 1200 + 1                                  # frames at 0, 1200, ... up to K
     if verify_video is not None:
         assert verify_video(out / "S1.mp4") == n
+    # the same command again, without --resume, keeps every file and names the two ways on
+    kept = {f.name: f.read_bytes() for f in out.iterdir()}
+    r = _run(out, "--hours", "1", *movie)
+    assert r.returncode == 2 and "--resume" in r.stderr and "--overwrite" in r.stderr, r.stderr
+    assert {f.name: f.read_bytes() for f in out.iterdir()} == kept
 
     # resume to K + 2500 steps, and run the same length uninterrupted: identical trajectories
     hours = f"{(K + 2500) * 0.001 / 3600:.12g}"

@@ -6,7 +6,8 @@
   naming the key and the point, exit 2, before anything is written.
 - Outcomes come from the analysis's last quarter; the table and a plot per swept key from the run folders.
 - Real runs (slow): 2 points x 1 seed with --jobs 2 give run folders, the CSV and the plot; a second sweep of the
-  same file runs nothing; a point that breaks an invariant fails alone, and an interrupted point resumes.
+  same file runs nothing; a point that breaks an invariant fails alone, and an interrupted point resumes
+  with --resume.
 All real runs share one small configuration (S1 on 20 x 20 µm, 3.6 simulated s), so its kernels compile once."""
 from __future__ import annotations
 
@@ -316,7 +317,9 @@ def test_a_failing_point_fails_alone_and_an_interrupted_one_resumes(tmp_path, ca
     assert run_scene(ok.scene, out_dir=str(d), stop_after_steps=1000, progress=False)["status"] == "interrupted"
     assert main(["sweep", str(f), "--dry-run", "--out", str(root)]) == 0
     assert "interrupted run.dt_ms=1_seed=1" in capsys.readouterr().out
-    rc = main(["sweep", str(f), "--jobs", "2", "--out", str(root)])
+    assert main(["sweep", str(f), "--jobs", "2", "--out", str(root)]) == 2      # nothing continues unasked
+    assert "--resume" in capsys.readouterr().err
+    rc = main(["sweep", str(f), "--jobs", "2", "--out", str(root), "--resume"])
     out = capsys.readouterr()
     assert rc == 1, out
     assert "s: 1 completed, 0 done before, 1 failed" in out.out

@@ -37,6 +37,12 @@ OUTCOMES = {   # name -> label on the plots
 }
 
 
+# the least top of each panel's y axis (every axis starts at 0): a difference smaller than this is noise to the eye
+# too, so a flat outcome stays flat instead of being stretched to fill the panel
+Y_TOP = {"n_aggregates": 2.0, "aggregate_cells": 10.0, "aggregate_radius_um": 5.0, "fraction_in_aggregates": 1.0,
+         "edge_speed_vb": 2.0, "speed_p95_vb": 2.0, "free_cell_speed_vb": 1.2}
+
+
 def _mean(x) -> float | None:
     a = np.asarray([v for v in x if v is not None], float)
     a = a[np.isfinite(a)]
@@ -140,6 +146,9 @@ def plot_against(table: list[dict], key: str, others: list[str], path: Path) -> 
                 ys = np.asarray([r[oc] for r in rs if r[key] == v and r[oc] is not None], float)
                 ys = ys[np.isfinite(ys)]
                 if not len(ys):
+                    if any(r[key] == v for r in rs):        # runs there, but nothing to measure: say so
+                        ax.annotate("none", (xpos[v], 0), xytext=(0, 4), textcoords="offset points", ha="center",
+                                    va="bottom", color="0.4", fontsize=8)
                     continue
                 ax.plot(np.full(len(ys), xpos[v]), ys, "o", color=colour, alpha=0.35, ms=4)
                 xs.append(xpos[v])
@@ -159,6 +168,8 @@ def plot_against(table: list[dict], key: str, others: list[str], path: Path) -> 
                     transform=ax.transAxes, ha="center", va="center", color="0.4")
         else:
             ax.ticklabel_format(axis="y", useOffset=False)
+            top = max([float(np.nanmax(ln.get_ydata())) for ln in ax.lines if len(ln.get_ydata())] + [0.0])
+            ax.set_ylim(0.0, max(Y_TOP.get(oc, 0.0), 1.15 * top))
         ax.grid(alpha=0.3)
     for ax in list(axes.flat)[n:]:
         ax.axis("off")

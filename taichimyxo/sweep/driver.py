@@ -53,11 +53,12 @@ def plan(path, out=None) -> tuple:
 
 
 def run_sweep(path, executor: str = "local", jobs: int | None = None, out=None, dry_run: bool = False,
-              options: dict | None = None, stream=None) -> dict:
+              options: dict | None = None, stream=None, resume: bool = False, overwrite: bool = False) -> dict:
     """Run the sweep file at `path` (taichimyxo/sweep/__init__.py: its format) with `executor`, `jobs` runs at a time
     (default: the executor's DEFAULT_JOBS, else the number of cores), into `out` (default sweeps-results/NAME).
-    Finished runs are skipped, interrupted ones resumed from their checkpoints. dry_run: validate and list, run and
-    write nothing.
+    Finished runs are skipped. Runs in `out` that did not finish (interrupted, killed, failed) are refused unless
+    resume (continue them from their checkpoints) or overwrite (start every run of the sweep again). dry_run:
+    validate and list, run and write nothing.
 
     Returns dict(sweep, root, points: [(point, run_dir, state)], results: run_dir -> result, counts: completed /
     skipped / failed / interrupted / not started, csv, plots). Bad input (the file, a point, the executor or its
@@ -72,6 +73,7 @@ def run_sweep(path, executor: str = "local", jobs: int | None = None, out=None, 
     counts = {"completed": 0, "skipped": 0, "failed": 0, "interrupted": 0, "not started": 0}
     if dry_run:
         return {"sweep": sweep, "root": root, "points": listing, "results": {}, "counts": counts, "jobs": jobs}
+    listing = check_earlier_runs(listing, root, resume, overwrite)
     from ..scene_run import check_output_dir
     check_output_dir(str(root))
     write_text_atomic(root / "sweep.toml", Path(sweep.path).read_text())     # what was asked, beside the results
@@ -91,3 +93,24 @@ def run_sweep(path, executor: str = "local", jobs: int | None = None, out=None, 
     col = collect(sweep, root, points)
     return {"sweep": sweep, "root": root, "points": listing, "results": results, "counts": counts, "jobs": jobs,
             "csv": col["csv"], "plots": col["plots"]}
+
+
+def check_earlier_runs(listing: list, root, resume: bool, overwrite: bool) -> list:
+    """Nothing of an earlier sweep is lost without being asked: runs that did not finish are continued only with
+    resume, and every run folder is removed and started again only with overwrite. Returns the listing to run."""
+    if resume and overwrite:
+        raise SweepError("--resume and --overwrite: give one (continue the sweep's runs, or start them again)")
+    from ..outdir import refuse_file_as_folder
+    refuse_file_as_folder(root)
+    unfinished = [(p, d, st) for p, d, st in listing if st in ("interrupted", "failed")]
+    if overwrite:
+        import shutil
+        for _, d, st in listing:
+            if st != "new":
+                shutil.rmtree(d)
+        return [(p, d, "new") for p, d, _ in listing]
+    if unfinished and not resume:
+        p, d, st = unfinished[0]
+        raise SweepError(f"{root} holds {len(unfinished)} unfinished run{'s' * (len(unfinished) > 1)} of this sweep "
+                         f"({p.name}: {st}): --resume to continue them, or --overwrite to start the sweep again")
+    return listing

@@ -40,15 +40,16 @@ def read_result(run_dir) -> dict | None:
 
 
 def state(run_dir) -> str:
-    """done (completed), failed (ended for good without completing), interrupted (a checkpoint to resume from) or
-    new."""
+    """done (completed), failed (ended for good without completing), interrupted (a checkpoint to resume from, or
+    the trajectory of a run killed before its first) or new."""
     d = Path(run_dir)
     r = read_result(d)
     if r and r.get("status") == "completed":
         return "done"
     if r and r.get("status") == "failed":
         return "failed"
-    if d.is_dir() and any(d.glob("*.ckpt.npz")):
+    # a checkpoint, or a trajectory of a run killed before its first checkpoint
+    if d.is_dir() and (any(d.glob("*.ckpt.npz")) or any(d.glob("*.gsd"))):
         return "interrupted"
     return "new"
 

@@ -69,8 +69,9 @@ def _run(run_dir: Path, point: dict, base: dict, threads: int, t0: float) -> dic
         and summary.get("simulated_seconds", 0.0) + scene.dt >= scene.hours * 3600 and gsd.is_file()
     if not simulated:
         resume = (out / f"{scene.name}.ckpt.npz").is_file()
+        # the sweep (or `videos`) decided before handing the point over: continue from a checkpoint, else start again
         summary = run_scene(scene, out_dir=str(out), arch=point.get("arch", "cpu"), resume=resume, progress=True,
-                            threads=threads, reuse=bool(point.get("reuse", False)))
+                            threads=threads, reuse=bool(point.get("reuse", False)), overwrite=not resume)
     status = "completed" if summary.get("completed") else summary["status"]
     res = {**base, "seed": scene.seed, "overrides": point.get("overrides", {}), "status": status,
            "steps": summary.get("steps"), "cells": summary.get("cells"),

@@ -229,7 +229,8 @@ def _outputs(table, path: Path) -> dict:
 def load_sweep(path) -> Sweep:
     """Read and check a sweep file (its format: taichimyxo/sweep/__init__.py). The points are resolved and validated
     by Sweep.points()."""
-    path = Path(path)
+    from ..catalogue import resolve_sweep
+    path = resolve_sweep(path)
     try:
         data = tomllib.loads(path.read_text())
     except FileNotFoundError:
