@@ -46,13 +46,15 @@ Per aggregate: centre (wrapped into the box); radius R = sqrt(2 <r^2> - a^2) ove
 percentile distance (the outer radius of a uniform disk or annulus a..R with the same second moment; a is reported as
 the inner radius, and the largest particle distance as R_edge); number of cells; sense; angular speed from tangential
 velocities omega_tan = sum r v_t / sum r^2 over member particles (v_t = v . phi-hat, signed, > 0 counter-clockwise,
-rad/min); the rigid-body test: particle speed against r, least-squares line through the origin (slope omega_fit,
-R^2 = 1 - SS_res / SS_tot about the mean) and with intercept (slope, intercept, R^2, standard error of the slope with
-the number of cells as the number of independent samples); ``rigid`` when R^2 (origin) >= 0.5 and omega_fit /
-|omega_tan| is within [0.75, 1.33]; with velocities, the least-squares fit of v = omega x (r - c) to the member
-particles' velocities (``rotation_fit``: omega, centre, R^2) and the speed-vs-radius profile (mean speed in rings of
-``ring_um``). Edge speed = mean speed of the outer ``edge_fraction`` (20 %) of member cells by centre distance (also
-as edge_speed / v_b) and the rigid extrapolation omega_fit R.
+rad/min); the speed-against-radius fit: particle speed against r, least-squares line through the origin (slope
+omega_fit, R^2 = 1 - SS_res / SS_tot about the mean) and with intercept (slope, intercept, R^2, standard error of the
+slope with the number of cells as the number of independent samples); the rigidity test, the one the table, the text
+and the plots use: the rigidity exponent alpha, the slope of ln speed against ln r over the member particles (1 for
+rigid rotation, 0 for cells all at one speed; ``rigid`` when alpha >= 0.5; None when the particles span radii by less
+than a factor of 2; aggregate_measure.rigidity_exponent, docs/figures.md "Rigidity"); with velocities, the
+least-squares fit of v = omega x (r - c) to the member particles' velocities (``rotation_fit``: omega, centre, R^2;
+not a rigidity test: cells all at v_b on circles give R^2 0.89-0.97). Edge speed = mean speed of the outermost ring
+of segments, those within one cell width inside R (also as edge_speed / v_b), and the rigid fit's omega x R.
 """
 from __future__ import annotations
 

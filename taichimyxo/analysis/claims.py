@@ -19,11 +19,13 @@ below 8 frames), "± SE over tracks" over aggregates followed in time:
    frames. The paper gives no number: active following and adhesion form stable aggregates, passive following only
    small unstable ones, non-guided cells none. Consistent when every active-following / adhesion run has a larger
    fraction than every passive / non-guided one.
-4. rigid_rotation: R² of the least-squares fit of v = omega x (r - c) to an aggregate's particle velocities
-   (``rotation_fit``), median and quartiles over aggregate-frames of aggregates with >= ``MIN_RIGID_CELLS`` (20)
-   cells (smaller ones are one ring of cells, rigid by construction). Consistent when the median over active
-   following and adhesion runs is >= 0.8.
-5-7. edge_speed_active / _adhesion / _slime: edge speed (mean speed of the outer 20 % of an aggregate's cells) / v_b,
+4. rigid_rotation: the rigidity exponent alpha of each aggregate (aggregate_measure.rigidity_exponent: the slope of
+   ln speed against ln r over its particles; 1 for rigid rotation, 0 when every cell moves at one speed on
+   circles), median and quartiles over the aggregate-frames it can judge (particles spanning radii by a factor of
+   2). Consistent when the median over active following and adhesion runs is >= 0.5 (RIGID_EXPONENT). The R² of
+   v = omega x (r - c) cannot be the test: cells all at v_b on circles pass it at 0.89-0.97.
+5-7. edge_speed_active / _adhesion / _slime: edge speed (mean speed of the outermost ring of segments, one cell
+   width inside the aggregate's outer radius R) / v_b,
    time mean per track seen in >= ``min_track_frames`` frames, mean ± SE over tracks; beside it the free-cell
    speed of the same runs. Paper: up to 4 v_b with active following, (4/3) v_b with adhesion (rigid-body model,
    S2 Text), about v_b with slime trails; edge faster than a free cell for short-range guiding. Consistent: active
@@ -38,6 +40,11 @@ below 8 frames), "± SE over tracks" over aggregates followed in time:
 10. strain_inside_vs_outside: mean segment strain energy of cells in aggregates over that of the other cells, mean
    over frames ± SE (only runs that logged strain). Paper: higher inside (toward the centre). Consistent when the
    ratio exceeds 1 by 2 SE.
+11-14. stiffness_clusters_non_guided, stiffness_aggregates_larger_fewer, stiffness_very_flexible_many_small_stable,
+   stiffness_very_rigid_none: the paper's four statements on bending stiffness over runs at several k_a
+   (taichimyxo/analysis/stiffness.py says how each is judged); "not measurable here" without runs at the
+   stiffnesses a statement compares, or with runs shorter than an hour.
+A claim the runs given cannot support (too short, too small) says "not measurable here" and why, not a verdict.
 """
 from __future__ import annotations
 
@@ -49,10 +56,12 @@ import os
 
 import numpy as np
 
+from .aggregate_measure import RIGID_EXPONENT
 from .claim_plots import write_claim_plots
 from .claim_runs import (KINDS, MIN_RIGID_CELLS, free_speed, load_runs, mean_se, needs, plus_minus, runs_of,
                          stable_tracks)
 from .stats import series_mean_se
+from .stiffness import records_from_runs, stiffness_rows
 from .summary import json_clean
 
 
@@ -66,6 +75,15 @@ def _row(cid, claim, paper, runs, measured, status, values, plot=None):
     return dict(id=cid, claim=claim, measured=measured, paper=paper,
                 runs="; ".join(_describe(r) for r in runs) if runs else "none", status=status,
                 values=values, plot=plot)
+
+
+def _speed_span_min(r) -> float:
+    """Minutes from a run's first analysed frame with speeds to its last (the first frame of a run has none)."""
+    m = r["summary"]["meta"]
+    t0, t1 = m["time_range_min"]
+    without = set(m.get("frames_without_speed_min") or [])
+    first = min((t for t in r["summary"]["timeseries"]["time_min"] if t not in without), default=t1)
+    return float(t1 - max(t0, first))
 
 
 def evaluate(runs: list[dict]) -> list[dict]:
@@ -125,26 +143,28 @@ def evaluate(runs: list[dict]) -> list[dict]:
                      "following only small unstable circular structures (Fig 2C); non-guided cells clusters (Fig "
                      "2B); no fraction is given (at 6 h)", runs, "; ".join(parts), status, vals, plot="fraction"))
 
-    # 4. rigid rotation: R^2 of v = omega x (r - c)
+    # 4. rigid rotation: the rigidity exponent of the speed-against-radius profile (aggregate_measure)
     vals, parts, judged = {}, [], []
     for r in runs:
-        r2 = [x for t in r["summary"]["tracks"] for x, n in zip(t["series"]["rotation_fit_r2"], t["series"]["n_cells"])
-              if x is not None and n >= MIN_RIGID_CELLS]
-        if not r2:
+        al = [x for t in r["summary"]["tracks"] for x in t["series"].get("rigidity_exponent", []) if x is not None]
+        if not al:
             if r["kind"] in ("active", "adhesion", "slime"):
-                parts.append(f"{label(r)} {r['label']}: no aggregate of >= {MIN_RIGID_CELLS} cells with velocities")
+                parts.append(f"{label(r)} {r['label']}: no aggregate spanning radii by a factor of 2")
             continue
-        q = np.percentile(r2, [25, 50, 75])
-        vals[r["label"]] = dict(kind=r["kind"], median=float(q[1]), quartiles=[float(q[0]), float(q[2])], n=len(r2))
-        parts.append(f"{label(r)} {r['label']}: median {q[1]:.2f} (quartiles {q[0]:.2f}-{q[2]:.2f}, "
-                     f"{len(r2)} aggregate-frames)")
+        q = np.percentile(al, [25, 50, 75])
+        vals[r["label"]] = dict(kind=r["kind"], median=float(q[1]), quartiles=[float(q[0]), float(q[2])], n=len(al),
+                                fraction_rigid=float(np.mean(np.asarray(al) >= RIGID_EXPONENT)))
+        parts.append(f"{label(r)} {r['label']}: median α {q[1]:.2f} (quartiles {q[0]:.2f}-{q[2]:.2f}), "
+                     f"{100 * vals[r['label']]['fraction_rigid']:.0f} % of {len(al)} aggregate-frames rigid")
         if r["kind"] in ("active", "adhesion"):
-            judged += r2
+            judged += al
     sr = runs_of(runs, "active", "adhesion")
-    status = (needs("active") if not sr else f"no aggregate of >= {MIN_RIGID_CELLS} cells" if not judged else
-              "consistent" if float(np.median(judged)) >= 0.8 else "not consistent")
-    rows.append(_row("rigid_rotation", f"Aggregates rotate as rigid bodies (R² of v = ω × (r − c), aggregates of "
-                     f">= {MIN_RIGID_CELLS} cells)",
+    status = (needs("active") if not sr else "not measurable here: no aggregate of these runs spans radii by a "
+              "factor of 2 (a ring of cells, or a run too short to form larger aggregates)" if not judged else
+              "consistent" if float(np.median(judged)) >= RIGID_EXPONENT else "not consistent")
+    rows.append(_row("rigid_rotation", "Aggregates rotate as rigid bodies (rigidity exponent α, speed ~ r^α over "
+                     f"an aggregate's particles; rigid when α >= {RIGID_EXPONENT:g}; 1 rigid, 0 every cell at one "
+                     "speed)",
                      "stable rotating aggregates rotate as rigid bodies: cells do not slide laterally, cells in the "
                      "centre move slower than at the edge (short-range guiding); with slime trails most cells move "
                      "at v_b", runs, "; ".join(parts) or "no aggregates", status, vals, plot="rigid"))
@@ -223,9 +243,14 @@ def evaluate(runs: list[dict]) -> list[dict]:
             parts.append(f"{label(r)} {r['label']}: no aggregates")
     fr = lambda rs: [vals[r["label"]]["fraction_aggregate_frames_long_lived"] or 0.0 for r in rs]  # noqa: E731
     pas, act = fr(runs_of(runs, "passive")), fr(runs_of(runs, "active", "adhesion"))
-    status = (needs(*([] if pas else ["passive"]) + ([] if act else ["active"])) if not (pas and act) else
-              "consistent" if max(pas) < min(act) else "not consistent")
     stable_min = runs[0]["summary"]["parameters"]["stable_lifetime_min"] if runs else 10
+    # a run whose frames with speeds span less than the lifetime asked for cannot show one (its 0 % would be the
+    # run's, not the cells')
+    span = [_speed_span_min(r) for r in runs_of(runs, "passive", "active", "adhesion")]
+    status = (needs(*([] if pas else ["passive"]) + ([] if act else ["active"])) if not (pas and act) else
+              f"not measurable here: a run with {min(span):.1f} min of measured speeds cannot show a lifetime of "
+              f"{stable_min:g} min (needs longer runs)" if min(span) < stable_min else
+              "consistent" if max(pas) < min(act) else "not consistent")
     rows.append(_row("aggregate_lifetimes", f"Aggregate lifetimes (tracks by shared cells; long-lived: >= "
                      f"{stable_min:g} min)",
                      "passive following gives only small unstable circular structures that quickly dissipate; active "
@@ -259,6 +284,10 @@ def evaluate(runs: list[dict]) -> list[dict]:
                      "overlaps (strain energy) are higher towards the centre of rotating aggregates, and stay high "
                      "there (Fig 2F, S8 Video)", [r for r in runs if r["label"] in vals], measured, status, vals,
                      plot="strain" if vals else None))
+
+    # 11-14. the paper's statements on bending stiffness (stiffness.py), over the runs' k_a
+    rows += [dict(r, runs="; ".join(_describe(x) for x in runs if x["kind"] in ("non-guided", "active")) or "none",
+                  plot=None) for r in stiffness_rows(records_from_runs(runs))]
     return rows
 
 

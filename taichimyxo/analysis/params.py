@@ -22,7 +22,6 @@ DEFAULTS = dict(
     min_circulation=0.5,       # mean cos(angle between velocity and the tangent) over member particles
     min_inside_fraction=0.4,   # members among the cells inside the aggregate
     min_circulation_r2=0.5,    # fraction of the velocity variance that is circulation about the centre
-    edge_fraction=0.2,         # outer fraction of member cells (by radius) that defines the edge speed
     max_gap_frames=2,          # tracking: analysed frames an aggregate may be missed
     link_overlap=0.3,          # tracking: shared cells / members of the smaller aggregate for a link
     link_min_shared=2,         # tracking: shared cells for a link at least

@@ -61,8 +61,9 @@ def write_plots(s: dict, base: str) -> list[str]:
         r, sp = big["_scatter"]
         ax[0, 0].scatter(r, sp, s=3, alpha=0.4, label="particles")
         rr = np.linspace(0, r.max(), 50)
-        ax[0, 0].plot(rr, big["omega_fit_rad_per_min"] * rr, "r", label=f"ω r, ω = {big['omega_fit_rad_per_min']:.3f}"
-                      f" rad/min, R² = {big['r2_origin']:.2f}")
+        ax[0, 0].plot(rr, big["omega_fit_rad_per_min"] * rr, "r", label=f"rigid: ω r, ω = "
+                      f"{big['omega_fit_rad_per_min']:.3f} rad/min; rigidity exponent α = "
+                      f"{fmt(big.get('rigidity_exponent'))}")
         ax[0, 0].axhline(vb, color="k", ls=":", label="v_b")
         ax[0, 0].axvline(big["radius_um"], color="g", ls="--", label="R")
         ax[0, 0].set(xlabel="distance from centre (µm)", ylabel="speed (µm/min)",
@@ -160,4 +161,32 @@ def write_plots(s: dict, base: str) -> list[str]:
            title=f"t = {geo.t_min:.0f} min: {len(aggs)} aggregates (circles: radius R, label: edge speed)")
     fig.colorbar(lc, ax=ax, orientation="horizontal", fraction=0.04, pad=0.06, label="segment speed (µm/min)")
     save(fig, "snapshot")
+    if aggs:
+        save(profile_figure(plt, aggs, vb, geo.t_min), "profiles")
     return files
+
+
+def profile_figure(plt, aggs: list[dict], vb: float, t_min: float, most: int = 12):
+    """Speed against radius, one panel per aggregate (the largest `most`): its particles, the rigid line ω r, one
+    speed v_b and the rigidity exponent α with the verdict it gives (the one rigidity measure: aggregate_measure)."""
+    aggs = sorted(aggs, key=lambda a: -a["n_cells"])[:most]
+    nc = min(4, len(aggs))
+    nr = -(-len(aggs) // nc)
+    fig, axes = plt.subplots(nr, nc, figsize=(3.2 * nc, 2.8 * nr), constrained_layout=True, squeeze=False)
+    for ax in axes.ravel()[len(aggs):]:
+        ax.set_axis_off()
+    for ax, a in zip(axes.ravel(), aggs):
+        r, sp = a["_scatter"]
+        ax.scatter(r, sp, s=2, alpha=0.4)
+        rr = np.linspace(0, max(float(r.max()), a["radius_um"]), 30)
+        ax.plot(rr, a["omega_fit_rad_per_min"] * rr, "r", lw=1, label="ω r (rigid)")
+        ax.axhline(vb, color="k", ls=":", lw=1, label="v_b (one speed)")
+        ax.axvline(a["radius_um"], color="g", ls="--", lw=1, label="R")
+        al = a.get("rigidity_exponent")
+        verdict = "n/a: too few radii" if al is None else ("rigid" if a["rigid"] else "not rigid")
+        ax.set_title(f"{a['n_cells']} cells, α = {fmt(al)}: {verdict}\nedge {a['edge_speed_vb']:.2f} v_b, ω R "
+                     f"{a['edge_speed_rigid_vb']:.2f} v_b", fontsize=8)
+        ax.set(xlabel="r (µm)", ylabel="speed (µm/min)")
+    axes.ravel()[0].legend(fontsize=6)
+    fig.suptitle(f"speed against radius per aggregate, t = {t_min:.0f} min", fontsize=9)
+    return fig

@@ -9,9 +9,11 @@ def fmt(x, spec=".2f"):
     return "n/a" if x is None or (isinstance(x, float) and not math.isfinite(x)) else format(x, spec)
 
 
-def _fit_r2(a: dict):
-    """R² of the aggregate's fit of v = ω × (r − c) to its particle velocities (None without velocities)."""
-    return (a.get("rotation_fit") or {}).get("r2")
+def _rigid(a: dict) -> str:
+    """The aggregate's verdict by its rigidity exponent (n/a: its particles span too few radii to judge)."""
+    if a.get("rigidity_exponent") is None:
+        return "n/a"
+    return "yes" if a["rigid"] else "no"
 
 
 def _pct(x):
@@ -35,13 +37,13 @@ def format_summary(summary: dict) -> str:
     t = summary.get("final_time_min")
     lines.append(f"{len(fin)} rotating aggregate(s)" + (f" at t = {t:.1f} min" if t is not None else ""))
     if fin:
-        lines.append("    centre (µm)        R (µm)  cells  ω (rad/min)  edge (µm/min)  edge/v_b  R²(fit)  rigid")
+        lines.append("    centre (µm)        R (µm)  cells  ω (rad/min)  edge (µm/min)  edge/v_b  α(v~r^α)  rigid")
         for a in sorted(fin, key=lambda a: -a["n_cells"]):
             c = a["centre_um"]
             lines.append(f"  ({c[0]:7.1f}, {c[1]:7.1f})  {a['radius_um']:6.1f}  {a['n_cells']:5d}  "
                          f"{fmt(a['omega_rad_per_min'], '+8.3f')}     {fmt(a['edge_speed_um_per_min'], '6.2f')}"
-                         f"        {fmt(a['edge_speed_vb'], '5.2f')}    {fmt(_fit_r2(a), '5.2f')}   "
-                         f"{'yes' if a['rigid'] else 'no'}")
+                         f"        {fmt(a['edge_speed_vb'], '5.2f')}    {fmt(a.get('rigidity_exponent'), '5.2f')}    "
+                         f"{_rigid(a)}")
     pr = summary["predictions"]
     st = [tr for tr in summary["tracks"] if tr["stable"]]
     lines.append(f"{len(summary['tracks'])} aggregate track(s), {len(st)} seen in >= "
@@ -65,11 +67,12 @@ def format_summary(summary: dict) -> str:
                      f"log-log exponent {fmt(reg['loglog_exponent'], '.2f')}")
     rr = pr["rigid_rotation"]
     if rr["n_aggregate_frames"]:
-        q = rr.get("rotation_fit_r2_quartiles") or [None, None]
-        lines.append(f"rigid rotation: median R² of the fit v = ω × (r − c) {fmt(rr.get('rotation_fit_r2_median'))} "
-                     f"(quartiles {fmt(q[0])}-{fmt(q[1])}, {rr.get('n_rotation_fits', 0)} aggregate-frames); "
-                     f"{rr['fraction_rigid'] * 100:.0f} % rigid by speed ∝ r, median ω_fit/ω_tan "
-                     f"{fmt(rr['omega_fit_over_omega_tan_median'], '.2f')}")
+        q = rr.get("rigidity_exponent_quartiles") or [None, None]
+        lines.append(f"rigid rotation (rigidity exponent α: speed ~ r^α over an aggregate; 1 rigid, 0 one speed; "
+                     f"rigid when α >= 0.5): median α {fmt(rr.get('rigidity_exponent_median'))} (quartiles "
+                     f"{fmt(q[0])}-{fmt(q[1])}), {fmt(_pct(rr.get('fraction_rigid')), '.0f')} % rigid, over "
+                     f"{rr.get('n_measurable', 0)} of {rr['n_aggregate_frames']} aggregate-frames (the others span "
+                     f"too few radii to judge)")
     sh = summary["speed_histograms"]
     if sh["mean_inside"] is not None:
         lines.append(f"mean cell speed inside aggregates {sh['mean_inside']:.2f}, outside "
@@ -77,6 +80,49 @@ def format_summary(summary: dict) -> str:
     sp = summary.get("strain_profile")
     if sp:
         lines.append(f"strain energy inner (r < R/2) / outer: {fmt(sp['inner_over_outer'], '.2f')}")
+    if summary.get("measures"):
+        lines.extend(format_measures(summary["measures"]))
     if "analysis_seconds" in summary:
         lines.append(f"analysis took {summary.get('total_seconds', summary['analysis_seconds']):.1f} s")
     return "\n".join(lines)
+
+
+def _mean(x):
+    return sum(x) / len(x) if len(x) else float("nan")
+
+
+def format_measures(ms: dict) -> list[str]:
+    """The lines of the experimental measures (analysis/measures.py) in the analyze report."""
+    lines = []
+    d = ms["defects"]
+    if d["time_min"]:
+        lines.append(f"defects (Q field, grid {d['spacing_um']:g}, smoothing {d['smoothing_um']:g} µm): last frame "
+                     f"{d['n_plus_half'][-1]} +1/2, {d['n_minus_half'][-1]} -1/2; mean per frame "
+                     f"{_mean(d['n_plus_half']):.1f} +1/2, {_mean(d['n_minus_half']):.1f} -1/2; {d['n_tracks']} "
+                     f"tracks, median lifetime {fmt(d['track_lifetime_min_median'], '.1f')} min")
+    cs = ms["cluster_sizes"]
+    if cs.get("alpha") is not None:
+        ci = cs.get("alpha_ci95") or [None, None]
+        sc = fmt(cs["s_cut"], ".1f") if cs["s_cut"] else "none (pure power law)"
+        lines.append(f"cluster sizes ({cs['n_clusters']} clusters): P(s) ~ s^-a exp(-s/s_c), a = {cs['alpha']:.2f} "
+                     f"[{fmt(ci[0])}, {fmt(ci[1])}], s_c = {sc}; exponential p = "
+                     f"{cs['p_exponential']:.2g}; preferred: {cs['preferred']}")
+    for key, name in (("orientation_correlation", "orientation"), ("velocity_correlation", "velocity")):
+        c = ms.get(key)
+        if c:
+            lines.append(f"{name} correlation length {fmt(c['length_um'], '.1f')} µm (per-frame mean "
+                         f"{fmt(c['length_frame_mean_um'], '.1f')} ± {fmt(c['length_se_um'], '.1f')}, "
+                         f"{c['n_frames']} frames)")
+    m = ms.get("msd")
+    if m and m.get("exponent") is not None:
+        lines.append(f"MSD exponent {m['exponent']:.2f} ± {fmt(m['exponent_se'], '.2f')} (lags up to "
+                     f"{m['fit_max_lag_min']:.0f} min)")
+    ev = ms.get("events")
+    if ev:
+        lines.append(f"reversals: {ev['n_reversals']}, interval median {fmt(ev['interval_median_min'], '.1f')} min "
+                     f"(mean {fmt(ev['interval_mean_min'], '.1f')}, CV {fmt(ev['interval_cv'])}); "
+                     f"{fmt(None if ev['fraction_suppressed'] is None else 100 * ev['fraction_suppressed'], '.0f')} % "
+                     f"of due reversals suppressed; guiding links formed {ev['n_links_formed']}, broken "
+                     f"{ev['n_links_broken']}")
+    lines.extend(f"skipped: {s}" for s in ms.get("skipped", []))
+    return lines

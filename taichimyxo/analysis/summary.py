@@ -23,8 +23,11 @@ import numpy as np
 
 from ..frame import Frame
 from .aggregates import find_aggregates
+from .aggregate_measure import RIGID_EXPONENT
 from .cells import CellGeometry
 from .clusters import cell_clusters
+from .measure_plots import write_measure_plots
+from .measures import Measures, finish_measures
 from .params import PAPER, R_BINS, fill_cell_defaults, parameters
 from .plots import write_plots
 from .tracking import confirmed, lifetime_stats, link_tracks, public, size_regression, track_summaries
@@ -81,9 +84,10 @@ def _confirm(item, neighbours, P):
     return geo, cl, aggs
 
 
-def analyze_frames(frames: Iterable[Frame], v_b: float = 4.0, **params) -> dict:
+def analyze_frames(frames: Iterable[Frame], v_b: float = 4.0, measures=None, **params) -> dict:
     """Analyse an iterable of Frames (see the module docstring). Returns the summary dict (JSON-ready after
-    json_clean); private keys starting with '_' carry data for the plots."""
+    json_clean); private keys starting with '_' carry data for the plots. measures: a measures.Measures that is
+    fed every frame (its geometry and cluster sizes)."""
     P = parameters(**params)
     t0 = time.perf_counter()
     ts = dict(time_min=[], mean_speed_um_per_min=[], polar_order=[], nematic_order=[], local_polar_order=[],
@@ -123,6 +127,8 @@ def analyze_frames(frames: Iterable[Frame], v_b: float = 4.0, **params) -> dict:
         else:
             ts["local_polar_order"].append(float("nan"))
             ts["local_nematic_order"].append(float("nan"))
+        if measures is not None:
+            measures.add(geo, sizes)
         csize = sizes[lab]
         ts["n_clusters"].append(int((sizes >= 2).sum()))
         ts["largest_cluster"].append(int(sizes.max()))
@@ -191,6 +197,7 @@ def _summarise(P, v_b, t0, ts, per_frame, size_dist, sbins, hist_edges, h_in, h_
     final = last_agg_frame[1] if last_agg_frame else []
     all_aggs = [a for fa in per_frame if fa for a in fa]
     r2v = [a["rotation_fit"]["r2"] for a in all_aggs if a.get("rotation_fit")]
+    alphas = [a["rigidity_exponent"] for a in all_aggs if a.get("rigidity_exponent") is not None]
     ratio = [a["omega_fit_over_omega_tan"] for a in all_aggs]
     predictions = dict(
         paper=PAPER,
@@ -204,7 +211,13 @@ def _summarise(P, v_b, t0, ts, per_frame, size_dist, sbins, hist_edges, h_in, h_
                                                    [a["edge_speed_um_per_min"] for a in final]),
         rigid_rotation=dict(
             n_aggregate_frames=len(all_aggs),
-            fraction_rigid=float(np.mean([a["rigid"] for a in all_aggs])) if all_aggs else None,
+            # the one rigidity measure (aggregate_measure.rigidity_exponent), over the aggregate-frames it can judge
+            measure="rigidity exponent: slope of ln(speed) against ln(r); rigid when >= 0.5",
+            n_measurable=len(alphas),
+            rigidity_exponent_median=float(np.median(alphas)) if alphas else None,
+            rigidity_exponent_quartiles=[float(np.percentile(alphas, 25)), float(np.percentile(alphas, 75))]
+            if alphas else None,
+            fraction_rigid=float(np.mean([a >= RIGID_EXPONENT for a in alphas])) if alphas else None,
             r2_origin_median=float(np.nanmedian([a["r2_origin"] for a in all_aggs])) if all_aggs else None,
             r2_linear_median=float(np.nanmedian([a["linear_fit"]["r2"] for a in all_aggs])) if all_aggs else None,
             omega_fit_over_omega_tan_median=float(np.nanmedian(ratio)) if all_aggs else None,
@@ -220,7 +233,8 @@ def _summarise(P, v_b, t0, ts, per_frame, size_dist, sbins, hist_edges, h_in, h_
     rr = predictions["rigid_rotation"]
     em = predictions["edge_speed_vb_mean"]
     predictions["verdict"] = dict(
-        criteria="aggregates: stable tracks (>= min_track_frames); rigid: fraction of aggregate-frames rigid >= 0.5; "
+        criteria="aggregates: stable tracks (>= min_track_frames); rigid: half or more of the measurable aggregate-frames "
+                 "have a rigidity exponent >= 0.5 (the median >= 0.5); "
                  "edge faster than v_b: mean edge speed / v_b over tracks > 1.15; size-independent: |t| of the edge "
                  "speed vs radius slope < 2 (needs >= 3 tracks)",
         n_stable_aggregates=len(stable),
@@ -268,15 +282,19 @@ def _summarise(P, v_b, t0, ts, per_frame, size_dist, sbins, hist_edges, h_in, h_
 
 
 def analyze(gsd_path: str, out_dir: str | None = None, every: int = 1, v_b: float | None = None,
-            plots: bool = True, **params) -> dict:
+            plots: bool = True, measures: bool = False, measure_params: dict | None = None, **params) -> dict:
     """Analyse a trajectory; write <stem>.analysis.json (and PNG plots) next to it or in out_dir. Returns the summary
-    (JSON-clean). v_b: free-cell speed in µm/min; default from the stored scene (cell.speed_um_per_min) or 4."""
+    (JSON-clean). v_b: free-cell speed in µm/min; default from the stored scene (cell.speed_um_per_min) or 4.
+    measures: also the experimental measures (measures.py: defects, cluster sizes, correlations, MSD, events)."""
     from ..trajectory import read_frames, read_scene
     t0 = time.perf_counter()
     scene = read_scene(gsd_path)
     if v_b is None:
         v_b = float((scene.get("cell") or {}).get("speed_um_per_min", 4.0) or 4.0)
-    s = analyze_frames(read_frames(gsd_path, every=every), v_b=v_b, **params)
+    acc = Measures(**(measure_params or {})) if measures else None
+    s = analyze_frames(read_frames(gsd_path, every=every), v_b=v_b, measures=acc, **params)
+    if acc is not None:
+        s["measures"] = finish_measures(acc, gsd_path)
     out_dir = out_dir or os.path.dirname(os.path.abspath(gsd_path))
     os.makedirs(out_dir, exist_ok=True)
     stem = os.path.splitext(os.path.basename(gsd_path))[0]
@@ -284,6 +302,8 @@ def analyze(gsd_path: str, out_dir: str | None = None, every: int = 1, v_b: floa
     files = []
     if plots:
         files = write_plots(s, os.path.join(out_dir, stem + ".analysis"))
+        if acc is not None:
+            files += write_measure_plots(s["measures"], acc.last, os.path.join(out_dir, stem + ".analysis"))
     s["plots"] = files
     s["total_seconds"] = time.perf_counter() - t0
     clean = json_clean({k: v for k, v in s.items() if not k.startswith("_")})

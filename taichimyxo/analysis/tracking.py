@@ -193,7 +193,8 @@ def track_summaries(tracks: list[dict], min_track_frames: int, stable_lifetime_m
                         omega_rad_per_min=[a["omega_rad_per_min"] for a in aa],
                         edge_speed_um_per_min=[a["edge_speed_um_per_min"] for a in aa],
                         r2_origin=[a["r2_origin"] for a in aa],
-                        rotation_fit_r2=[(a.get("rotation_fit") or {}).get("r2") for a in aa]),
+                        rotation_fit_r2=[(a.get("rotation_fit") or {}).get("r2") for a in aa],
+                        rigidity_exponent=[a.get("rigidity_exponent") for a in aa]),
         ))
     return track_out
 

@@ -1,0 +1,165 @@
+"""`python -m taichimyxo figures [FIG ...] [--scale paper|half|quarter] [--seeds N] [--executor local|slurm]
+[--jobs N] [--threads N] [--out DIR] [--dry-run] [--no-run]`: each of the paper's figures as one composite image.
+
+Every figure's runs are checked first (an unknown figure, a scale that leaves too few cells, missing runs under
+--no-run: one line, exit 2, nothing written); then the runs of every figure asked for go to one executor together
+(so the cores stay busy across figures), finished runs skipped and interrupted ones resumed; then each figure whose
+runs completed is composed (taichimyxo.figures.compose) and, for S2 Fig and S3 Fig, its stiffness series measured."""
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+from .specs import FIGURES, SCALES, figure
+
+EXIT_RUN_FAILED = 1
+EXIT_INTERRUPTED = 130
+
+
+def add_parser(sub, executor_arguments) -> None:
+    """The `figures` subcommand on the CLI's subparsers; executor_arguments adds --executor, --jobs and the Slurm
+    options as `sweep` has them."""
+    f = sub.add_parser("figures", help="the paper's figures (Fig2, Fig3, Fig4, S2Fig, S3Fig, S6Fig) as composite "
+                                       "images, from their runs (sweeps/figures/*.toml)")
+    f.add_argument("names", nargs="*", metavar="FIG", help=f"figures (default: all): {', '.join(FIGURES)}")
+    f.add_argument("--scale", default="paper", choices=list(SCALES),
+                   help="the box's sides: paper (the scenes' own), half or quarter (cells with the area)")
+    f.add_argument("--seeds", type=int, help="seeds per run (default: the figure's sweep file: 3 for S2Fig and "
+                                             "S3Fig, 1 for the others); the panels show the first")
+    f.add_argument("--threads", type=int, default=None, help="CPU threads per run, local executor (default 1)")
+    f.add_argument("--out", default="figures", help="output folder: the figures and their runs (default figures/)")
+    f.add_argument("--dry-run", action="store_true", help="the runs, simulated hours and estimated wall time; "
+                                                          "nothing runs or is written")
+    f.add_argument("--no-run", action="store_true", help="compose from finished runs only; missing runs are refused")
+    executor_arguments(f, "runs at a time (default: the number of cores), each on one thread")
+    f.set_defaults(figures_main=cmd_figures)        # the CLI dispatches here without importing this module twice
+
+
+def resolve_names(names: list[str]) -> list:
+    from .plan import FigureError
+    if not names:
+        return list(FIGURES.values())
+    out = []
+    for n in names:
+        fig = figure(n)
+        if fig is None:
+            raise FigureError(f"figures: unknown figure {n!r}; known: {', '.join(FIGURES)}")
+        if fig not in out:
+            out.append(fig)
+    return out
+
+
+def cmd_figures(args, options: dict) -> int:
+    from .plan import FigureError, plan_figure
+    if args.seeds is not None and args.seeds < 1:
+        raise FigureError(f"figures --seeds {args.seeds}: give at least 1")
+    if args.threads is not None and (args.threads < 1 or args.executor != "local"):
+        raise FigureError(f"figures --threads {args.threads}: a count >= 1, with the local executor (Slurm: "
+                          f"--cpus-per-task)")
+    if args.dry_run and args.no_run:
+        raise FigureError("figures: --dry-run and --no-run together; keep one")
+    figs = resolve_names(args.names)
+    plans = [plan_figure(f, args.scale, Path(args.out), args.seeds) for f in figs]
+    jobs = args.jobs or os.cpu_count() or 1
+    if args.dry_run:
+        print_dry_run(plans, jobs)
+        return 0
+    if args.no_run:
+        for p in plans:
+            missing = [pt.name for pt, st in zip(p.points, p.states()) if st != "done"]
+            if missing:
+                raise FigureError(f"figures {p.figure.name} --no-run: {len(missing)} of {len(p.points)} runs not "
+                                  f"finished in {p.root} ({missing[0]}{', ...' if len(missing) > 1 else ''}); run "
+                                  f"without --no-run")
+    rc = 0
+    if not args.no_run:
+        options = {**options, **({"threads": args.threads} if args.threads else {})}
+        rc = run_all(plans, args.executor, args.jobs, options)
+        if rc == EXIT_INTERRUPTED:
+            return rc
+    from .compose import compose_figure
+    for p in plans:
+        if any(st != "done" for st in p.states()):          # a failed run: the other figures are still made
+            print(f"taichimyxo: {p.figure.name} not composed: not all of its runs finished", file=sys.stderr)
+            continue
+        for path in compose_figure(p, Path(args.out)):
+            print(f"wrote {path}")
+    return rc
+
+
+def print_dry_run(plans: list, jobs: int) -> None:
+    from ..progress import duration
+    from .plan import bench_rates, makespan, run_seconds
+    rates = bench_rates()
+    total, all_secs = 0.0, []
+    for p in plans:
+        secs = [run_seconds(pt.scene, rates) for pt in p.points]
+        hours = sum(pt.scene.hours for pt in p.points)
+        total += hours
+        cells = sorted({pt.scene.n_cells for pt in p.points})
+        w, h = p.points[0].scene.box
+        todo = [s for s, st in zip(secs, p.states()) if st != "done"]
+        est = f", about {duration(sum(s for s in todo if s))} of run time left" if None not in secs else ""
+        print(f"{p.figure.name} ({p.scale_name}, {w:g} x {h:g} µm, {'/'.join(map(str, cells))} cells): "
+              f"{len(p.points)} runs x {len(p.sweep.seeds)} seed{'s' if len(p.sweep.seeds) > 1 else ''}, "
+              f"{hours:g} simulated hours{est}; {p.figure.scenes}; in {p.root}")
+        for pt, st, s in zip(p.points, p.states(), secs):
+            print(f"  {st:<11} {pt.name:<34} {pt.scene.hours:g} h  {'~' + duration(s) if s else ''}")
+            if st != "done" and s:
+                all_secs.append(s)
+    runs = sum(len(p.points) for p in plans)
+    if not bench_rates():
+        print(f"total: {runs} runs, {total:g} simulated hours; no benchmark table to estimate the wall time from")
+        return
+    print(f"total: {runs} runs, {total:g} simulated hours; estimated wall time on this machine with {jobs} at a time "
+          f"(one thread each): {duration(makespan(all_secs, jobs))} (the benchmark's particle-steps/s for each kind "
+          f"of scene, benchmarks/results/throughput.csv, x the cost of a formed state; taichimyxo/figures/plan.py)")
+
+
+def run_all(plans: list, executor: str, jobs: int | None, options: dict) -> int:
+    """Every figure's unfinished runs through one executor; then each sweep's table. 0, or the exit status."""
+    from ..scene_run import check_output_dir
+    from ..sweep.collect import collect
+    from ..sweep.driver import executor_module
+    from ..sweep.progress import SweepProgress
+    from ..sweep.rundir import prepare
+    from ..sweep.spec import load_sweep
+    from .plan import write_sweep_file
+    ex = executor_module(executor)
+    opts = {**plans[0].sweep.executor_options.get(executor, {}), **options}
+    if hasattr(ex, "check_options"):
+        opts = ex.check_options(opts)
+    jobs = jobs or getattr(ex, "DEFAULT_JOBS", None) or os.cpu_count() or 1
+    for p in plans:
+        check_output_dir(str(p.root))
+    dirs, sizes = [], {}
+    for p in plans:
+        p.sweep = load_sweep(write_sweep_file(p))       # the run folders name the sweep file beside them
+        for pt in p.points:
+            d = str(prepare(pt, p.root, p.sweep))
+            dirs.append(d)
+            sizes[d] = pt.scene.steps * pt.scene.n_cells
+    todo = sorted((d for d in dirs if _state(d) != "done"), key=lambda d: -sizes[d])    # longest first
+    names = "+".join(p.figure.name for p in plans)
+    progress = SweepProgress(names, total=len(dirs), skipped=len(dirs) - len(todo), jobs=jobs)
+    progress.tick()
+    try:
+        results = ex.execute(todo, jobs, opts, progress) if todo else {}
+    finally:
+        progress.close()
+    for p in plans:
+        collect(p.sweep, p.root, p.points)
+    bad = {d: r for d, r in results.items() if r.get("status") not in ("completed", "skipped")}
+    for d, r in bad.items():
+        print(f"  {r.get('status', 'failed')} {r.get('name')}: {r.get('error') or ''} (log: {d}/run.log)",
+              file=sys.stderr)
+    if any(r.get("status") in ("interrupted", "not started") for r in bad.values()):
+        print("taichimyxo: figures interrupted; run the same command again to continue", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    return EXIT_RUN_FAILED if bad else 0
+
+
+def _state(d: str) -> str:
+    from ..sweep.rundir import state
+    return state(d)

@@ -1,0 +1,167 @@
+"""A figure's runs: its sweep file at the chosen scale and seeds, their points and folders, and what they cost.
+
+`figures --scale` and `--seeds` write a copy of the figure's sweep file (sweeps/figures/NAME.toml) with `scale` and
+`seeds` set into OUT/NAME/sweep.toml, and the runs are that sweep's: `python -m taichimyxo sweep OUT/NAME/sweep.toml`
+runs the same folders, so a figure's runs can be finished either way, and a rerun skips the finished ones."""
+from __future__ import annotations
+
+import csv
+import math
+import re
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..scene import SceneError
+from ..sweep.rundir import state, write_text_atomic
+from ..sweep.spec import load_sweep
+from .specs import MIN_CELLS, SCALES, Figure
+
+THROUGHPUT_CSV = Path(__file__).resolve().parents[2] / "benchmarks" / "results" / "throughput.csv"
+# a step once aggregates have formed costs this many times the benchmark's step at the start (paper-scale S3 at its
+# state after 1 simulated hour against its start; README, "Speed")
+FORMED_STATE_FACTOR = 3.3
+TOP_KEYS = ("seeds", "scale", "box_um", "hours")
+
+
+class FigureError(SceneError):
+    """Bad input to `figures`: one line, exit 2, nothing written."""
+
+
+@dataclass
+class FigureRuns:
+    figure: Figure
+    scale_name: str
+    root: Path                   # OUT/NAME: the copy of the sweep file and runs/
+    text: str                    # the copy of the sweep file
+    sweep: object                # taichimyxo.sweep.Sweep
+    points: list                 # taichimyxo.sweep.Point, in the sweep's order
+
+    def run_dir(self, point) -> Path:
+        return point.run_dir(self.root)
+
+    def trajectory(self, point) -> Path:
+        return self.run_dir(point) / f"{point.scene.name}.gsd"
+
+    def states(self) -> list[str]:
+        return [state(self.run_dir(p)) for p in self.points]
+
+    def first_seed_point(self, match: dict):
+        """The point of the figure's first seed whose swept values include `match`."""
+        seed = self.sweep.seeds[0]
+        return next((p for p in self.points if p.seed == seed and all(
+            _same(p.overrides.get(k, _scene_value(p.scene, k)), v) for k, v in match.items())), None)
+
+
+def _scene_value(scene, key: str):
+    sec, k = key.split(".")
+    return scene.raw[sec][k]
+
+
+def _same(a, b) -> bool:
+    if isinstance(a, float) or isinstance(b, float):
+        return math.isclose(float(a), float(b), rel_tol=1e-9)
+    return a == b
+
+
+def sweep_text(figure: Figure, scale: float, seeds: int | None, hours: float | None = None,
+               extra_set: dict | None = None) -> str:
+    """The figure's sweep file with `scale` (and `seeds`, `hours` where given) set; `extra_set` adds [set] keys."""
+    try:
+        text = figure.sweep_path.read_text()
+    except OSError as e:
+        raise FigureError(f"figures {figure.name}: sweep file {figure.sweep_path}: {e.strerror or e}") from None
+    head, sep, tail = text.partition("\n[")
+    pat = re.compile(rf"^\s*({'|'.join(TOP_KEYS)})\s*=.*$", re.M)
+    kept = {k: m.group(0) for m in pat.finditer(head) for k in [m.group(1)]}
+    head = pat.sub("", head).rstrip("\n")
+    lines = [f"scale = {scale:g}" if scale != 1.0 else "",
+             f"seeds = {seeds}" if seeds else kept.get("seeds", ""),
+             f"hours = {hours:g}" if hours else kept.get("hours", "")]
+    body = head + "\n" + "\n".join(x.strip() for x in lines if x) + "\n" + sep + tail
+    if extra_set:
+        add = "".join(f"{k} = {_toml(v)}\n" for k, v in extra_set.items())
+        body = body.replace("\n[set]\n", "\n[set]\n" + add) if "\n[set]\n" in body else body + "\n[set]\n" + add
+    return f"# written by `python -m taichimyxo figures {figure.name}` from {figure.sweep_path.name}\n" + body
+
+
+def _toml(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    return f'"{v}"' if isinstance(v, str) else repr(v)
+
+
+def plan_figure(figure: Figure, scale_name: str, out: Path, seeds: int | None = None, *, scale: float | None = None,
+                hours: float | None = None, extra_set: dict | None = None,
+                min_cells: int = MIN_CELLS) -> FigureRuns:
+    """The figure's runs at --scale `scale_name` (or a bare `scale` factor, for tests), validated, nothing written.
+    A scale that leaves any run fewer than `min_cells` cells is a FigureError."""
+    factor = SCALES[scale_name] if scale is None else float(scale)
+    text = sweep_text(figure, factor, seeds, hours, extra_set)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / f"{figure.name}.toml"
+        path.write_text(text)
+        try:
+            sweep = load_sweep(path)
+            points = sweep.points()
+        except SceneError as e:
+            raise FigureError(f"figures {figure.name} --scale {scale_name}: {str(e).replace(str(path) + ': ', '')}"
+                              ) from None
+    few = min(points, key=lambda p: p.scene.n_cells)
+    if few.scene.n_cells < min_cells:
+        w, h = few.scene.box
+        raise FigureError(f"figures {figure.name} --scale {scale_name}: {few.scene.n_cells} cells in a {w:g} x {h:g} "
+                          f"µm box, fewer than the {min_cells} a panel needs; use a larger --scale")
+    return FigureRuns(figure, scale_name, Path(out) / figure.name, text, sweep, points)
+
+
+def write_sweep_file(runs: FigureRuns) -> Path:
+    """OUT/NAME/sweep.toml, the sweep whose runs the figure shows (the driver reads it back from there)."""
+    runs.root.mkdir(parents=True, exist_ok=True)
+    path = runs.root / "sweep.toml"
+    write_text_atomic(path, runs.text)
+    return path
+
+
+# ------------------------------------------------------------------------------------------------ cost
+def _bench_scene(scene) -> str:
+    """The benchmark scene whose cost per particle-step stands for this scene's."""
+    if scene.raw["population"]["start"] == "aligned":
+        return "S11"
+    if scene.raw["slime"]["enabled"]:
+        return "S17"
+    return {"none": "S1", "passive": "S2", "active": "S3", "adhesion": "S4"}.get(scene.guiding, "S3")
+
+
+def bench_rates(path: Path = THROUGHPUT_CSV) -> dict:
+    """benchmark scene -> [(particles, particle-steps/s)] from the benchmark's table (empty when it is absent)."""
+    out: dict = {}
+    try:
+        with open(path, newline="") as f:
+            for row in csv.DictReader(f):
+                if row.get("precision") == "mixed" and row.get("integrator") == "explicit":
+                    out.setdefault(row["scene"], []).append((int(row["particles"]),
+                                                             float(row["particle_steps_per_s"])))
+    except (OSError, ValueError, KeyError):
+        return {}
+    return out
+
+
+def run_seconds(scene, rates: dict) -> float | None:
+    """Estimated wall seconds of one run on one thread: its steps x particles at the benchmark's rate for the
+    nearest size of the same kind of scene, times FORMED_STATE_FACTOR; None without a benchmark."""
+    rows = rates.get(_bench_scene(scene)) or rates.get("S3")
+    if not rows:
+        return None
+    particles = scene.n_cells * scene.N
+    _, rate = min(rows, key=lambda r: abs(math.log(r[0] / max(particles, 1))))
+    return scene.steps * particles / rate * FORMED_STATE_FACTOR
+
+
+def makespan(seconds: list[float], jobs: int) -> float:
+    """Wall time of runs of these lengths, `jobs` at a time, longest first."""
+    ends = [0.0] * max(1, jobs)
+    for s in sorted(seconds, reverse=True):
+        i = ends.index(min(ends))
+        ends[i] += s
+    return max(ends) if seconds else 0.0

@@ -1,0 +1,214 @@
+"""Issue 27 (the paper's figures; the stiffness series; claims measured as the paper defines them) and issue 26
+item 5 (one rigidity measure; 'not measurable here').
+
+- `figures`: bad input (unknown figure, a scale that leaves too few cells, --no-run with runs missing) is one line,
+  exit 2, nothing written; --dry-run counts runs, simulated hours and the estimated wall time and writes nothing.
+- Composites from finished runs: synthetic trajectories in the run folders (--no-run, through the CLI), and one
+  figure from tiny real runs through the sweep machinery (S1 on 20 x 20 µm, 3.6 simulated s: the configuration
+  tests/test_sweep.py compiles).
+- Rigidity: cells all at v_b on circles pass the vector R² of a rigid fit (0.89-0.97, omega R = 1.3 v_b) and fail
+  the rigidity exponent; a rigid rotation passes it. Edge speed is the outermost ring's, also for an aggregate
+  smaller than a cell.
+- The stiffness statements: consistent, not consistent and 'not measurable here' on synthetic records."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from taichimyxo.analysis import find_aggregates, synthetic_frames, write_synthetic
+from taichimyxo.cli import main
+from taichimyxo.figures.plan import plan_figure
+from taichimyxo.figures.specs import FIGURES
+
+V_B = 4.0
+
+
+def error_line(capsys, rc) -> str:
+    out = capsys.readouterr()
+    assert rc == 2, (rc, out.err)
+    lines = [ln for ln in out.err.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("taichimyxo: error: "), out.err
+    return lines[0]
+
+
+# ------------------------------------------------------------------------------------------------ bad input
+@pytest.mark.parametrize("argv, says", [
+    (["Fig9"], "unknown figure 'Fig9'"),
+    (["S6Fig", "--scale", "quarter"], "31 cells in a 25 x 25 µm box"),
+    (["Fig3", "--scale", "quarter"], "90 cells"),
+    (["Fig2", "--scale", "half", "--no-run"], "--no-run: 4 of 4 runs not finished"),
+    (["Fig2", "--seeds", "0"], "--seeds 0"),
+    (["Fig2", "--scale", "tiny"], "invalid choice"),
+])
+def test_bad_input_is_one_line_exit_2_nothing_written(tmp_path, capsys, argv, says):
+    out = tmp_path / "figs"
+    try:
+        rc = main(["figures", *argv, "--out", str(out)])
+    except SystemExit as e:              # argparse's own refusals exit from the parser
+        rc = e.code
+    line = error_line(capsys, rc)
+    assert says in line
+    assert not out.exists()
+
+
+def test_dry_run_counts_runs_hours_and_wall_time(tmp_path, capsys):
+    out = tmp_path / "figs"
+    assert main(["figures", "Fig2", "S3Fig", "--scale", "half", "--jobs", "2", "--out", str(out), "--dry-run"]) == 0
+    text = capsys.readouterr().out
+    assert "Fig2 (half, 100 x 100 µm, 500 cells): 4 runs x 1 seed, 24 simulated hours" in text
+    assert "S3Fig (half, 100 x 100 µm, 500 cells): 12 runs x 3 seeds, 72 simulated hours" in text
+    assert "total: 16 runs, 96 simulated hours; estimated wall time on this machine with 2 at a time" in text
+    assert "A: start; B: S1; C: S2; D: S3; E: S4; F: S8" in text          # which scenes each figure comes from
+    assert not out.exists()
+
+
+def test_every_figure_has_a_sweep_file_whose_points_match_its_panels(tmp_path):
+    for fig in FIGURES.values():
+        runs = plan_figure(fig, "half", tmp_path)
+        assert fig.sweep_path.is_file()
+        for panel in fig.panels:
+            assert runs.first_seed_point(panel.match) is not None, (fig.name, panel.letter)
+    assert len(FIGURES["Fig2"].panels) == 6 and len(FIGURES["S3Fig"].panels) == 4
+    assert "Fig 3A" in FIGURES["S3Fig"].caption and "Fig 2A" in FIGURES["S3Fig"].caption     # the reading chosen
+
+
+# ------------------------------------------------------------------------------------------------ composites
+def _fake_finished_runs(runs, **synthetic):
+    """Each run folder of `runs` as a finished run: a synthetic trajectory and result.json."""
+    for p in runs.points:
+        d = runs.run_dir(p)
+        d.mkdir(parents=True, exist_ok=True)
+        write_synthetic(str(runs.trajectory(p)), v_b=V_B, box=p.scene.box, n_frames=3, **synthetic)
+        (d / "result.json").write_text(json.dumps({"status": "completed"}))
+
+
+def test_no_run_composes_from_finished_runs(tmp_path, capsys):
+    out = tmp_path / "figs"
+    runs = plan_figure(FIGURES["Fig3"], "half", out)
+    _fake_finished_runs(runs, gas=30, seed=1)
+    assert main(["figures", "Fig3", "--scale", "half", "--no-run", "--out", str(out)]) == 0
+    doc = json.loads((out / "Fig3.half.json").read_text())
+    assert [p["letter"] for p in doc["panels"]] == ["A", "B", "C"] and all(p["drawn"] for p in doc["panels"])
+    assert doc["panels"][0]["frame"] == "first" and doc["panels"][0]["time_s"] == 0
+    assert "At half scale the box is 30 µm" in doc["caption"]
+    assert "Shorter than the paper's run" in doc["caption"]                   # 2 simulated minutes, not 3 h
+    assert (out / "Fig3.half.png").stat().st_size > 10000 and (out / "Fig3.half.pdf").is_file()
+
+
+def test_strain_panel_without_logged_strain_says_so(tmp_path):
+    from taichimyxo.figures.compose import compose_figure
+    runs = plan_figure(FIGURES["Fig4"], "half", tmp_path)
+    _fake_finished_runs(runs, gas=30, seed=2)
+    compose_figure(runs, tmp_path)
+    doc = json.loads((tmp_path / "Fig4.half.json").read_text())
+    assert [p["drawn"] for p in doc["panels"]] == [True, False, True]
+    assert "B: strain energy not logged." in doc["caption"]
+
+
+def test_composite_from_tiny_runs_with_stiffness_series(tmp_path):
+    from taichimyxo.figures.command import run_all
+    from taichimyxo.figures.compose import compose_figure
+    runs = plan_figure(FIGURES["S2Fig"], "tiny", tmp_path, seeds=1, scale=0.1, hours=0.001,
+                       extra_set={"output.frame_interval_min": 0.01}, min_cells=1)
+    assert [p.scene.n_cells for p in runs.points] == [20] * 4
+    assert run_all([runs], "local", 2, {}) == 0
+    assert all(st == "done" for st in runs.states())
+    files = compose_figure(runs, tmp_path)
+    doc = json.loads((tmp_path / "S2Fig.tiny.json").read_text())
+    assert [p["letter"] for p in doc["panels"]] == list("ABCD") and all(p["drawn"] for p in doc["panels"])
+    csv_text = (tmp_path / "stiffness.tiny.csv").read_text()
+    assert csv_text.count("non-guided,") == 4 * 5                         # 4 stiffnesses x 5 measures
+    claims = (tmp_path / "stiffness.tiny.claims.md").read_text()
+    assert claims.count("not measurable here") == 4                       # 3.6 s runs support no verdict
+    assert {f.name for f in files} >= {"S2Fig.tiny.png", "S2Fig.tiny.pdf", "stiffness.tiny.png"}
+    assert run_all([runs], "local", 2, {}) == 0                           # a rerun skips the finished runs
+
+
+# ------------------------------------------------------------------------------------------------ rigidity
+def test_cells_all_at_v_b_on_circles_are_not_rigid():
+    """The flow of issue 27: every cell at v_b on circles, no rigidity at all. The vector R² of v = ω × (r − c)
+    passes it and ω R is 1.3 v_b; the rigidity exponent fails it, and the edge speed is v_b."""
+    for radius in (4.25, 10.25):
+        disk = dict(centre=(50.0, 50.0), radius=radius, omega=1.0, speed=V_B)
+        fr = next(synthetic_frames(box=(100.0, 100.0), disks=[disk], speed_noise=0.05, jitter_deg=5, seed=4))
+        (a,) = find_aggregates(fr, v_b=V_B)
+        assert 0.85 < a["rotation_fit"]["r2"] < 0.98                      # what the old test looked at
+        assert a["edge_speed_rigid_vb"] == pytest.approx(1.3, abs=0.05)    # ω R of the rigid fit
+        assert abs(a["rigidity_exponent"]) < 0.1 and not a["rigid"]
+        assert a["edge_speed_vb"] == pytest.approx(1.0, abs=0.05)
+
+
+def test_rigid_rotation_is_rigid_and_edge_speed_is_at_the_outer_radius():
+    # an aggregate 3.25 µm in radius, smaller than a cell (9 cells on rings at r = 1.5 to 3 µm; edge at 3 µm), and
+    # a large one: the outermost ring moves at 2 v_b in both
+    for radius, omega in ((3.25, 2 * V_B / 3.0), (10.25, 2 * V_B / 10.0)):
+        disk = dict(centre=(40.0, 60.0), radius=radius, omega=omega)
+        fr = next(synthetic_frames(box=(100.0, 100.0), disks=[disk], speed_noise=0.02, seed=2))
+        (a,) = find_aggregates(fr, v_b=V_B)
+        assert a["rigidity_exponent"] == pytest.approx(1.0, abs=0.1) and a["rigid"]
+        assert a["edge_speed_vb"] == pytest.approx(2.0, rel=0.05)
+        assert a["edge_speed_rigid_vb"] == pytest.approx(omega * a["radius_um"] / V_B, rel=0.05)
+
+
+def test_table_text_and_plot_use_one_rigidity_measure(tmp_path):
+    from taichimyxo.analysis import analyze, format_summary
+    from taichimyxo.analysis.claims import claims
+    runs = {}
+    for name, disk in (("uniform", dict(centre=(50.0, 50.0), radius=6.25, omega=1.0, speed=V_B)),
+                       ("rigid", dict(centre=(50.0, 50.0), radius=6.25, omega=0.6))):
+        runs[name] = write_synthetic(str(tmp_path / f"{name}.gsd"), v_b=V_B, box=(100.0, 100.0), n_frames=4,
+                                     disks=[disk], speed_noise=0.05, seed=3, scene={"guiding": {"kind": "active"}})
+    s = analyze(runs["uniform"], plots=True)
+    txt = format_summary(s)
+    assert "α(v~r^α)" in txt and "R²(fit)" not in txt and "0 % rigid" in txt
+    assert any(p.endswith(".profiles.png") for p in s["plots"])
+    assert s["predictions"]["verdict"]["rigid_rotation"] is False
+    for name, verdict in (("uniform", "not consistent"), ("rigid", "consistent")):
+        rows = {r["id"]: r for r in claims([runs[name]], out_dir=str(tmp_path / name), plots=False)["rows"]}
+        assert rows["rigid_rotation"]["status"] == verdict
+        assert "median α" in rows["rigid_rotation"]["measured"]
+
+
+def test_short_run_lifetimes_not_measurable(tmp_path):
+    from taichimyxo.analysis.claims import claims
+    common = dict(v_b=V_B, box=(60.0, 60.0), n_frames=4, seed=5)
+    act = write_synthetic(str(tmp_path / "act.gsd"), disks=[dict(centre=(30.0, 30.0), radius=6.25, omega=0.6)],
+                          scene={"guiding": {"kind": "active"}}, **common)
+    pas = write_synthetic(str(tmp_path / "pas.gsd"), gas=20, scene={"guiding": {"kind": "passive"}}, **common)
+    rows = {r["id"]: r for r in claims([act, pas], out_dir=str(tmp_path / "c"), plots=False)["rows"]}
+    st = rows["aggregate_lifetimes"]["status"]
+    assert st.startswith("not measurable here: a run with 3.0 min of measured speeds cannot show a lifetime of 10")
+    assert {"stiffness_clusters_non_guided", "stiffness_very_rigid_none"} <= set(rows)
+
+
+# ------------------------------------------------------------------------------------------------ stiffness
+def _records(kind, by_ka: dict, hours=6.0, seeds=(1, 2)):
+    return [dict(kind=kind, k_a=ka, seed=s, measures={**m, "hours": hours}) for ka, m in by_ka.items() for s in seeds]
+
+
+def test_stiffness_statements_judged_and_not_measurable():
+    from taichimyxo.analysis.stiffness import stiffness_rows
+
+    def act(n, cells, frac, life=0.9):
+        return dict(n_aggregates=n, aggregate_cells=cells, fraction_in_aggregates=frac, mean_cluster_size=None,
+                    long_lived_fraction=life)
+
+    paper_like = _records("active", {1e-18: act(12, 8, 0.5), 1e-17: act(6, 20, 0.5), 1e-16: act(3, 40, 0.4),
+                                     1e-15: act(0.1, 5, 0.01)})
+    paper_like += _records("non-guided", {ka: dict(mean_cluster_size=s) for ka, s in
+                                          ((1e-18, 2.0), (1e-17, 3.0), (1e-16, 5.0), (1e-15, 9.0))})
+    rows = {r["id"]: r for r in stiffness_rows(paper_like)}
+    assert [r["status"] for r in rows.values()] == ["consistent"] * 4
+    assert "k_a = 1e-18: 12 ± 0 (n = 2)" in rows["stiffness_very_flexible_many_small_stable"]["measured"]
+    reversed_ = _records("active", {1e-18: act(3, 40, 0.4), 1e-17: act(6, 20, 0.5), 1e-16: act(12, 8, 0.5),
+                                    1e-15: act(4, 10, 0.3)})
+    rows = {r["id"]: r for r in stiffness_rows(reversed_)}
+    assert rows["stiffness_aggregates_larger_fewer"]["status"] == "not consistent"
+    assert rows["stiffness_very_rigid_none"]["status"] == "not consistent"
+    assert rows["stiffness_clusters_non_guided"]["status"].startswith("not measurable here: needs non-guided runs")
+    short = _records("active", {1e-18: act(12, 8, 0.5), 1e-17: act(6, 20, 0.5), 1e-16: act(3, 40, 0.4)}, hours=0.17)
+    rows = {r["id"]: r for r in stiffness_rows(short)}
+    assert rows["stiffness_aggregates_larger_fewer"]["status"].startswith("not measurable here: runs of 10 simulated")
+    assert rows["stiffness_very_rigid_none"]["status"].startswith("not measurable here: needs active runs at k_a = 1e-15")
