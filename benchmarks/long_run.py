@@ -1,4 +1,4 @@
-"""Long run (issue 5): 30 simulated minutes of an S13-like high-density population keep every invariant.
+"""Long run: 30 simulated minutes of an S13-like high-density population keep every invariant.
 
 S13 is the paper's hardest default scene for the integrator: aligned start at area fraction 1 (4e7 cells/cm²),
 soft contacts k_c = 0.002 N/m, flexible cells with active following. Here on a reduced periodic box (15 x 15 µm,
@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import csv
 import math
+import os
 import re
 import sys
 import time
@@ -130,7 +131,7 @@ def main(argv=None) -> int:
           f"closest segments of different cells {min(r['d_other_min'] for r in fin):.3f} W, of one cell "
           f"{min(r['d_self_min'] for r in fin):.3f} W; spring energy <= {mx('e_spring'):.3g}, bending <= "
           f"{mx('e_bend'):.3g}, contact <= {mx('e_contact'):.3g} pN·µm")
-    print(f"wrote {out}")
+    print(f"wrote {os.path.relpath(out)}")          # the log is committed: no machine path in it
     sim.close()
     if bad:
         kinds = {}

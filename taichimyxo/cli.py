@@ -54,7 +54,7 @@ def _build_parser() -> argparse.ArgumentParser:
     s.add_argument("scene")
     s.add_argument("--hours", type=float, help="simulated hours (overrides run.hours)")
     s.add_argument("--preview", action="store_true",
-                   help="small, short version (about a minute on 2 cores): the box side scaled by preview.scale "
+                   help="small, short version (its time: docs/performance.md): the box side scaled by preview.scale "
                         "(cells with the area), at most preview.hours, frames every preview.frame_interval_min; "
                         "values given with --set or an option (--hours, --frame-minutes, --size) are used as given, "
                         "never scaled")
@@ -103,6 +103,8 @@ def _build_parser() -> argparse.ArgumentParser:
     a.add_argument("--no-plots", action="store_true", help="write the JSON summary only")
     a.add_argument("--measures", action="store_true", help="also defects, cluster-size fits, correlations, MSD and "
                    "reversal events (docs/measures.md)")
+    a.add_argument("--smoothing", type=float, default=None, metavar="UM", help="--measures: smoothing length of "
+                   "the orientation field, µm (default 5, one cell length; its grid is half of it, at most 2.5 µm)")
 
     c = sub.add_parser("claims", help="the paper's claims measured on runs, one table (markdown, CSV, JSON + plots)")
     c.add_argument("trajectories", nargs="+", metavar="RUN.gsd", help="GSD trajectories written by taichimyxo; each "
@@ -121,8 +123,8 @@ def _build_parser() -> argparse.ArgumentParser:
 
     w = sub.add_parser("sweep", help="a grid of scene keys x seeds from a sweep file, in parallel here or on a "
                                      "Slurm cluster; one table of outcomes")
-    w.add_argument("file", help="sweep file (TOML), or the name of a shipped one, e.g. example; its format: README, "
-                                "\"Sweeps\"")
+    w.add_argument("file", help="sweep file (TOML), or the name of a shipped one, e.g. example; its format: "
+                                "docs/sweeps.md")
     w.add_argument("--resume", action="store_true", help="continue the sweep's unfinished runs in --out")
     w.add_argument("--overwrite", action="store_true", help="start the sweep's runs in --out again")
     w.add_argument("--out", help="results folder (default sweeps-results/NAME, NAME the sweep's)")
@@ -271,8 +273,12 @@ def cmd_render(args) -> int:
 def cmd_analyze(args) -> int:
     from .analysis import format_summary
     from .api import analyze
+    if args.smoothing is not None and not args.smoothing > 0:
+        return _fail(f"analyze: --smoothing {args.smoothing:g}: give a length in µm above 0")
     summary = analyze(args.trajectory, out_dir=args.out, every=args.every, v_b=args.v_b, plots=not args.no_plots,
-                      measures=args.measures)
+                      measures=args.measures or args.smoothing is not None,
+                      measure_params=None if args.smoothing is None else
+                      dict(smoothing_um=args.smoothing, spacing_um=min(2.5, args.smoothing / 2)))
     print(format_summary(summary))
     print(f"wrote {summary['json']}" + "".join(f"\nwrote {p}" for p in summary["plots"]))
     return 0

@@ -80,11 +80,11 @@ SCHEMA: dict[str, dict[str, tuple]] = {
         "mass_pg": (_F, 0.0, "nonneg", "particle mass for the semi-implicit Euler step, pg; 0 = overdamped"),
         "step_control": (_S, "fixed", ("fixed", "error"), "fixed: every step is run.dt_ms; error: each step covers "
                          "1 to run.step_max_multiple of them, chosen from the estimated local error (explicit only; "
-                         "README \"What accuracy costs\")"),
+                         "docs/accuracy.md)"),
         "step_tolerance_um": (_F, 1e-4, "pos", "step_control = error: the largest local error of a step, µm "
                               "(1/2 h max |v_n - v_n-1| over particles)"),
         "step_max_multiple": (_I, 2, ("range", 1, 64), "step_control = error: the longest step, in run.dt_ms"),
-        "skin_um": (_F, 0.1, "pos", "neighbour-list skin, µm (0.1: fastest of 0.1-0.45 in sparse and dense scenes, README \"Speed\")"),
+        "skin_um": (_F, 0.1, "pos", "neighbour-list skin, µm (the fastest measured, docs/performance.md)"),
         "max_neighbours": (_I, 0, "nonneg", "neighbour-list capacity per segment; 0 = from density"),
         "speed_window_s": (_F, 1.0, "pos", "window over which displayed speeds are averaged, s"),
     },

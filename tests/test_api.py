@@ -1,4 +1,4 @@
-"""The Python API (issue 14, item 4): the README's example runs as written; triggers, writers and the driver
+"""The Python API: the README's example runs as written; triggers, writers and the driver
 behave as the README says (a continued run writes what one run writes; a trajectory written again appends)."""
 from __future__ import annotations
 
@@ -30,7 +30,7 @@ def test_readme_example_runs_as_written(ti_cpu, tmp_path, monkeypatch, capsys):
         assert ns["result"].status == "completed" and sim.time == pytest.approx(3.0)
         assert capsys.readouterr().out.startswith("completed 3.0")
         steps = [fr.step for fr in read_frames(str(tmp_path / "out/S3.gsd"))]
-        assert steps == [0, 500, 1000, 1500]                       # 2 ms steps, a frame every second
+        assert steps == [0, 250, 500, 750]                          # S3's 4 ms steps, a frame every second
         assert verify_video(tmp_path / "out/S3.mp4") == 4
         frame, image = ns["frame"], ns["image"]
         assert frame.positions.shape == (ns["scene"].n_cells, ns["scene"].N, 2)

@@ -339,9 +339,9 @@ def claims(paths, out_dir: str | None = None, every: int = 1, v_b: float | None 
     files = []
     if plots:
         files = write_claim_plots(runs, rows, os.path.join(out_dir, "claims"))
-    for r in rows:
-        r.setdefault("plot_file", None)
-    run_info = [dict(label=r["label"], path=r["path"], kind=r["kind"], v_b_um_per_min=r["v_b"],
+    for r in rows:                  # outputs name their inputs and plots relative to out_dir, never machine paths
+        r["plot_file"] = os.path.relpath(r["plot_file"], out_dir) if r.get("plot_file") else None
+    run_info = [dict(label=r["label"], path=os.path.relpath(r["path"], out_dir), kind=r["kind"], v_b_um_per_min=r["v_b"],
                      n_cells=r["summary"]["meta"]["n_cells"], time_range_min=r["summary"]["meta"]["time_range_min"],
                      n_frames_analyzed=r["summary"]["meta"]["n_frames_analyzed"], every=every) for r in runs]
     doc = dict(claims=rows, runs=run_info, min_rigid_cells=MIN_RIGID_CELLS,

@@ -19,7 +19,7 @@ from .specs import MIN_CELLS, SCALES, Figure
 
 THROUGHPUT_CSV = Path(__file__).resolve().parents[2] / "benchmarks" / "results" / "throughput.csv"
 # a step once aggregates have formed costs this many times the benchmark's step at the start (paper-scale S3 at its
-# state after 1 simulated hour against its start; README, "Speed")
+# state after 1 simulated hour against its start; docs/performance.md)
 FORMED_STATE_FACTOR = 3.3
 TOP_KEYS = ("seeds", "scale", "box_um", "hours")
 
