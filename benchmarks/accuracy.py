@@ -1,4 +1,4 @@
-"""Accuracy versus cost (issue 4): each method (integrator, contact treatment, time step, precision) against a
+"""Accuracy versus cost: each method (integrator, contact treatment, time step, precision) against a
 converged reference, and its wall time per simulated hour at paper scale.
 
     python benchmarks/accuracy.py [--quick] [--out DIR]

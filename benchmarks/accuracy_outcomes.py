@@ -1,4 +1,4 @@
-"""The accuracy study's outcome check (issue 15 item 5): does a larger step change what a user measures?
+"""The accuracy study's outcome check: does a larger step change what a user measures?
 
     python -m taichimyxo sweep sweeps/accuracy.toml --jobs 2 --out sweeps-results/accuracy    # the runs (~1.5 h)
     python benchmarks/accuracy_outcomes.py [sweeps-results/accuracy ...] [--rows CSV ...] [--out DIR]

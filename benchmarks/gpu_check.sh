@@ -1,24 +1,28 @@
 #!/usr/bin/env bash
-# The device check of issue 16, for the day a CUDA GPU is lent (an NVIDIA H200 for ~15 minutes): install, the `gpu`
-# tests (CUDA against the CPU in f32, mixed, f64; the free speed), then the CUDA throughput benchmark at 1x, 4x and
-# 16x the paper's area with the projected wall time of a full 6 h S3. Everything lands in $OUT; each step runs under
-# its own time limit, so the whole script ends within about 8 minutes (7.5 at worst), whatever hangs.
+# Check taichimyxo on a CUDA GPU and measure its speed there, in one command from the repository root:
 #
-# Prepare here, once (the device machine reaches no package index; its python3 is 3.12 with numpy, pytest,
-# pytest-xdist, matplotlib, scipy, imageio, tqdm, rich; taichi, dill and gsd travel as wheels, 57 MB):
-#     bash benchmarks/gpu_check.sh --prepare        # wheels into .whl/ (git-ignored through info/exclude)
-# then, with the device tool, from the repository root:
-#     run(command="bash benchmarks/gpu_check.sh", carry=[".whl"], timeout_s=560)
-# Without .whl/ and without taichi it runs `pip install -e '.[test]'` (a machine with a package index).
+#     bash benchmarks/gpu_check.sh
 #
-# What comes back ($OUT, 6 files): gpu_check.log (everything printed), env.txt (GPU, driver, versions, Taichi's CUDA
-# start), gpu_tests.xml (JUnit of the gpu tests), gpu_compare.jsonl (the differences each comparison measured:
-# tests/backend_compare.py), throughput.csv and throughput.json (rows per scene and size, projection of a full S3).
-# Nothing here is a claimed GPU figure until it has run on a GPU and been read.
+# It installs what is missing, runs the `gpu` tests (CUDA against the CPU in f32, mixed and f64 precision, and the free
+# cell speed) while the benchmark's kernels compile, then the CUDA throughput benchmark at 1x, 4x and 16x the paper's
+# area with the projected wall time of a full 6 h S3. Each step runs under its own time limit, so the script ends
+# within about 8 minutes whatever hangs. Results land in $OUT (default ./gpu-check-results, git-ignored):
+#   gpu_check.log       everything printed
+#   env.txt             GPU, driver, versions, whether Taichi started on CUDA
+#   gpu_tests.xml       the gpu tests' results (JUnit)
+#   gpu_compare.jsonl   the CUDA-CPU differences each comparison measured (tests/backend_compare.py)
+#   throughput.csv/json particle-steps per second per scene and size, and the full-S3 projection
+# Send these back with an issue, or add the numbers with their command to docs/performance.md.
 #
-# Knobs (for a dry run on the CPU: GPU_CHECK_ARCH=cpu GPU_CHECK_SIZES=0.04 PY=.venv/bin/python OUT=/tmp/x):
-#   PY (python3), GPU_CHECK_ARCH (cuda), GPU_CHECK_SIZES ("1 4 16"), GPU_CHECK_SCENES (S1,S3,S11),
-#   GPU_CHECK_STEPS (500), GPU_CHECK_WORKERS (6, pytest-xdist workers for the tests)
+# Installing: with a package index it runs `pip install -e '.[test]'` when taichi is missing. A GPU machine without
+# one needs the wheels brought along: on a machine with an index, `bash benchmarks/gpu_check.sh --prepare` downloads
+# taichi, dill and gsd for CPython 3.12 on x86-64 Linux (57 MB) into .whl/ (git-ignored); copy the clone with .whl/ to
+# the GPU machine and run the command above there (it installs the wheels into a scratch folder). Its Python must
+# already have numpy, pytest, matplotlib, scipy, imageio and tqdm; pytest-xdist is used when present.
+#
+# Settings (environment variables): PY (python3), OUT, GPU_CHECK_ARCH (cuda), GPU_CHECK_SIZES ("1 4 16"),
+# GPU_CHECK_SCENES (S1,S3,S11), GPU_CHECK_STEPS (500), GPU_CHECK_WORKERS (6 test workers). A dry run on a CPU:
+#     GPU_CHECK_ARCH=cpu GPU_CHECK_SIZES=0.04 PY=.venv/bin/python OUT=gpu-check-results/cpu bash benchmarks/gpu_check.sh
 set -u
 cd "$(dirname "$0")/.."
 PY=${PY:-python3}

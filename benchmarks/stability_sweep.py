@@ -1,4 +1,4 @@
-"""Stability sweep (issue 5): the largest stable time step per integrator over the paper's stiffness grid.
+"""Stability sweep: the largest stable time step per integrator over the paper's stiffness grid.
 
     python benchmarks/stability_sweep.py [--quick] [--out DIR]
     python benchmarks/stability_sweep.py --sparse [--out DIR]    # explicit: sparse start against the dense jam
@@ -25,7 +25,7 @@ from benchlib import DEFAULT_OUT, Method, Unstable, fmt, json_from_worker, make,
 
 PACKAGE_LIMITS = "taichimyxo/stability_limits.json"     # in a clone; a person copies the sweep's file here
 STAB_DT_MS = (0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 15.0, 20.0, 30.0, 50.0, 75.0, 100.0, 150.0, 200.0)
-# the stiffness grid of issue 5: k_a (N m) x k_c (N/m)
+# the paper's stiffness grid: k_a (N m) x k_c (N/m)
 K_A = (1e-18, 1e-17, 1e-16, 1e-15)
 K_C = (0.01, 0.002)
 # the largest step of each integrator within the tolerance (SPEED_TOL, STRAIN_TOL) of the accuracy study
@@ -229,7 +229,7 @@ def main(quick: bool = False, out_dir: str = DEFAULT_OUT) -> int:
 def sparse_main(out_dir: str = DEFAULT_OUT) -> int:
     """--sparse: the explicit step's limit in the sparse start against the dense jam, at the paper's low-density
     contact stiffness, for the four bending stiffnesses: how much larger a step a step-size controller could take
-    while the system is sparse (issue 15 item 4). Writes stability_sparse.{csv,md}; never the limits."""
+    while the system is sparse. Writes stability_sparse.{csv,md}; never the limits."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()

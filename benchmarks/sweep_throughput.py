@@ -1,5 +1,5 @@
 """Parallel runs against parallel threads: the total throughput of N runs x 1 thread against 1 run x N threads, the
-choice the local sweep executor makes (issue 11 item 3), measured in one invocation on this machine.
+choice the local sweep executor makes, measured in one invocation on this machine.
 
     python benchmarks/sweep_throughput.py [--quick] [--out DIR] [--n 2] [--scene S3] [--scale 0.5] [--minutes 1]
 

@@ -1,4 +1,4 @@
-"""Numerical-stability invariants of a running Simulation (issue 5), shared by the tests and benchmarks.
+"""Numerical-stability invariants of a running Simulation, shared by the tests and benchmarks.
 
 A state is healthy when
   - every position is finite;

@@ -1,4 +1,4 @@
-"""How kernels launch their loops, per arch, decided in one place (issue 16).
+"""How kernels launch their loops, per arch, decided in one place.
 
 Every kernel writes, before each top-level loop,
 
@@ -9,9 +9,9 @@ Every kernel writes, before each top-level loop,
 and selects the few algorithms that differ with `ti.static(loops.gpu)`; `loops` is the State's LoopShape, fixed when
 the Simulation is built, so every choice is made at compile time and a kernel holds one shape only.
 
-  cpu  exactly the choices measured on the 2-core CPU (README "Speed"): Taichi's CPU backend spends ~75 µs
-       launching a parallel loop, so below SERIAL_BELOW_SEGMENTS segments every loop over items runs serially (3x
-       faster for 125 cells), above it in parallel; the neighbour grid's prefix sum runs in one thread; the implicit
+  cpu  exactly the choices measured on a 2-core CPU (docs/performance.md): Taichi's CPU backend spends ~75 µs
+       launching a parallel loop, so below SERIAL_BELOW_SEGMENTS segments every loop over items runs serially
+       (faster for small systems), above it in parallel; the neighbour grid's prefix sum runs in one thread; the implicit
        step sums per-block partials of at most 64 blocks. Nothing else is configured: the compiled CPU kernels are
        those of before this module (the same offline-cache keys, bit-identical runs).
   gpu  no loop over items is serialized, blocks of GPU_BLOCK_DIM threads (Taichi's default, not yet tuned on a GPU);

@@ -1,4 +1,4 @@
-"""Issue 5, part 3: bad input through the command line is one clear line and exit 2 before any simulation starts,
+"""Bad input through the command line is one clear line and exit 2 before any simulation starts,
 and leaves the files already in the output folder as they were."""
 from __future__ import annotations
 

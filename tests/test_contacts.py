@@ -85,7 +85,7 @@ def test_side_by_side_force_is_continuous_in_tilt_and_stagger(pair_sim):
 
 def test_parallel_force_per_overlap_length(pair_sim):
     """Exactly parallel: k_c (W - d) per l0 of overlap, plus about one contact for the two ends of the overlap (the
-    poles' extra weight and the samples' fence posts; 0.96-1.07 with the stagger): the numbers the README states."""
+    poles' extra weight and the samples' fence posts; 0.96-1.07 with the stagger): the numbers docs/decisions.md states."""
     for st in (0.0, 0.25 * L0, 0.5 * L0, L0):
         pos, overlap = side_by_side(0.0, st)
         fy = contact_on(pair_sim, pos)[1, :, 1].sum()

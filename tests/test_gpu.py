@@ -1,4 +1,4 @@
-"""The GPU's kernels (issue 16): the GPU-shaped kernels equal the CPU-shaped ones on the CPU (every suite run), and
+"""The GPU's kernels: the GPU-shaped kernels equal the CPU-shaped ones on the CPU (every suite run), and
 on CUDA the same comparison against the CPU, in f32, mixed and f64, plus the free speed (marker `gpu`: skipped with
 one line where CUDA is not available; benchmarks/gpu_check.sh runs them on a lent GPU).
 

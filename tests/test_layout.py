@@ -1,4 +1,4 @@
-"""The package's shape (issue 14): no import cycles (module-level or inside functions), no private names imported
+"""The package's shape: no import cycles (module-level or inside functions), no private names imported
 across modules, no file over about 400 lines. Static: reads the sources, imports nothing."""
 import ast
 from pathlib import Path

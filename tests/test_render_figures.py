@@ -1,4 +1,4 @@
-"""Issue 12, movies and figure panels: time text, frame 0, frame size from the domain, readable labels, cell
+"""Movies and figure panels: time text, frame 0, frame size from the domain, readable labels, cell
 outlines, one PNG panel style, identity / polarity / orientation colourings and a settable range, and an MP4 that
 can be read while it is being written."""
 from __future__ import annotations

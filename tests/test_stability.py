@@ -1,4 +1,4 @@
-"""Issue 5, parts 1-2: hard cases stay numerically stable at the scene's default step.
+"""Hard cases stay numerically stable at the scene's default step.
 
 Every case runs the explicit integrator at the default step (scene.dt) and asserts, through
 taichimyxo.invariants.check_invariants after every window of 1 simulated second (the displayed-speed window):

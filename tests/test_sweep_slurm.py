@@ -1,4 +1,4 @@
-"""The Slurm executor on a real Slurm cluster (issue 11 items 4, 5): .ci/slurm.sh starts one on localhost (munged,
+"""The Slurm executor on a real Slurm cluster: .ci/slurm.sh starts one on localhost (munged,
 slurmctld, slurmd; CI runs it and sets TAICHIMYXO_SLURM_TESTS=1, which makes this test required). Elsewhere it is
 skipped, with the reason, when no cluster answers or when the cluster's nodes are other machines (the test pauses a
 job's process, so the jobs must run here). Two quick tests at the end need no cluster: the time-limit warning stops

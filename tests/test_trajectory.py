@@ -1,4 +1,4 @@
-"""Issue 12: the trajectory is a file other tools can trust.
+"""The trajectory is a file other tools can trust.
 
 - Every frame carries the cell bonds (stored once in frame 0 and inherited, as the HOOMD schema defines; never an
   explicit zero later), read back with the `gsd` reader at the last frame and with freud.

@@ -1,4 +1,4 @@
-"""The step-size controller (issue 15 item 4; docs/model.md "Numerics"): run.step_control = "error" lets
+"""The step-size controller (docs/model.md "Numerics", docs/accuracy.md): run.step_control = "error" lets
 the explicit step take 1 to run.step_max_multiple scene steps (run.dt_ms) at once, chosen from the estimated local
 error of the last step.
 
@@ -16,14 +16,10 @@ controller shrinks the next one. Steps are whole multiples of the scene's step, 
 in scene steps), the frame times, the reversal clocks and --resume stay exact; a step that would pass the end of a
 chunk (a frame, a check) is cut to fit, which leaves the controller's multiple unchanged.
 
-Measured (2026-12-01, paper-scale S3, mixed precision, the median over 40 steps of e at 2 / 4 / 6 ms): at the
-sparse start 2.2e-5 / 1.2e-4 / 2.0e-4 µm, after 3 simulated minutes (forming aggregates) 1.1e-3 / 2.0e-3 / 1.4e-2
-µm. The forming state's largest errors are not smooth: they scale with h, not h^2. About a dozen of 16 000 particles
-change velocity by ~2 µm/s every step, in alternating directions, at 1 to 4 ms alike: force jumps (a guided head's
-pull is F_max^g at gap d_g and zero beyond it, docs/model.md term 5; in contacts, a pole in the concave side of a
-bent neighbour's joint, whose nearest segment alternates between the two meeting there, term 4) that no step size
-resolves. So in aggregates the controller takes single steps: over a simulated hour of half-scale S3 at tolerance
-1e-3 µm, 1.05-1.09 scene steps per step (README "What accuracy costs").
+In forming aggregates the largest errors are not smooth (they scale with h, not h^2): force jumps no step size
+resolves (a guided head's pull is F_max^g at gap d_g and zero beyond it, docs/model.md term 5; a pole in the concave
+side of a bent neighbour's joint, whose nearest segment alternates between the two meeting there, term 4). So in
+aggregates the controller takes mostly single steps; the measured estimates and steps: docs/accuracy.md.
 """
 
 import math

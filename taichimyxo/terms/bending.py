@@ -25,10 +25,8 @@ def atan_unit(a):
 
 @ti.func
 def angle(y, x, fast: ti.template()):
-    """atan2(y, x). In force precision f32 (`fast`) an inlined polynomial (atan_unit) instead of libm's atan2f: the
-    six bending angles per cell cost 1.09 M of the sparse S3 step's 4.9 M instructions through libm, 0.78 M inlined
-    (callgrind, one thread), and the step's wall time fell 0.94-1.05 -> 0.87 ms (medians, alternating processes,
-    2 threads); as accurate as atan2f (2.7e-7 rad at most over 1e6 random angles, atan2f 2.5e-7). In f64 ti.atan2."""
+    """atan2(y, x). In force precision f32 (`fast`) an inlined polynomial (atan_unit) instead of libm's atan2f:
+    cheaper in the step kernel and as accurate (docs/performance.md, "The step kernel"). In f64 ti.atan2."""
     r = x * 0.0
     if ti.static(fast):
         ax = ti.abs(x)

@@ -246,7 +246,7 @@ class Contacts:
             nl = self.nl
             n = nl.nbr_n[s]
             if n > 0:                        # most segments of a sparse state have no partner: load nothing for them
-                # positions loaded and points mapped once per pair (S11: 27.1 -> 22.1 M instructions a step, callgrind)
+                # positions loaded and points mapped once per pair, not once per side (docs/performance.md)
                 xs_p, xs_a, xs_b, xs_n = self.chain_positions(s)
                 zero = ti.Vector([0.0, 0.0], dt=st.fdt)
                 Bs = self.rel(xs_b, xs_a)
@@ -257,8 +257,8 @@ class Contacts:
                         xt_p, xt_a, xt_b, xt_n = self.chain_positions(t)
                         # the segments' distance first (seg_distance's numbers: t's ends chained, a far pair cannot pass
                         # by mapping them to different images); no sample is nearer. No margin: a sample within W only
-                        # by rounding (~1e-7 µm, < 1e-3 pN) goes with its whole pair. S11's start, a lattice at exactly W,
-                        # had 18 700 such pairs evaluated each step under a 1e-3 margin: 22.1 -> 12.3 M instructions.
+                        # by rounding (~1e-7 µm, < 1e-3 pN) goes with its whole pair: a margin would evaluate every
+                        # pair of a lattice at exactly W (S11's start) in full for no force.
                         At = self.rel(xt_a, xs_a)
                         Bt = self.rel(xt_b, xt_a)                 # t's second point in t's own frame
                         _, _, c1, c2 = closest_points(zero, Bs, At, At + Bt)
@@ -267,7 +267,7 @@ class Contacts:
                             Ts = [At, self.rel(xt_b, xs_a), self.rel(xt_p, xs_a), self.rel(xt_n, xs_a)]
                             St = [self.rel(xs_a, xt_a), self.rel(xs_b, xt_a), self.rel(xs_p, xt_a),
                                   self.rel(xs_n, xt_a)]
-                            # the sides inlined: a dynamic loop selected every point at run time (22.2 M instructions)
+                            # the sides inlined: a dynamic loop would select every point at run time (slower)
                             sa, sb, ta, tb, _n = self.side(s, t, [zero, Bs], Ts, 0, s, 0)
                             pa, pb, oa, ob, _m = self.side(t, s, [zero, Bt], St, 0, s, 0)
                             v = ti.Vector([sa[0] + oa[0], sa[1] + oa[1], sb[0] + ob[0], sb[1] + ob[1],
