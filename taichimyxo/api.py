@@ -125,18 +125,19 @@ def render_movie(trajectory, out=None, *, color: str = "speed", size=(1920, 1080
 
 
 def analyze(trajectory, out_dir=None, *, every: int = 1, v_b: float | None = None, plots: bool = True,
-            measures: bool = False) -> dict:
+            measures: bool = False, measure_params: dict | None = None) -> dict:
     """Aggregates, rotation and speed profiles of a GSD trajectory (what ``python -m taichimyxo analyze`` does):
     the summary dict, also written as JSON (and PNG plots) next to the trajectory or into out_dir. A file that is
     not a trajectory of cells is a TrajectoryError before anything is written. measures: also defects, cluster
-    sizes, correlations, MSD and reversal events (taichimyxo.analysis.measures; ``analyze --measures``)."""
+    sizes, correlations, MSD and reversal events (taichimyxo.analysis.measures; ``analyze --measures``), with
+    measure_params overriding its defaults (e.g. dict(smoothing_um=2.0, spacing_um=1.0))."""
     from .trajectory import check_trajectory
     check_trajectory(os.fspath(trajectory))
     from .outdir import check_out_folder
     check_out_folder(os.fspath(out_dir) if out_dir else os.path.dirname(os.path.abspath(os.fspath(trajectory))))
     from .analysis import analyze as analyze_trajectory
     return analyze_trajectory(os.fspath(trajectory), out_dir=out_dir, every=every, v_b=v_b, plots=plots,
-                              measures=measures)
+                              measures=measures, measure_params=measure_params)
 
 
 def claims(trajectories, out_dir=None, *, every: int = 1, v_b: float | None = None, plots: bool = True,

@@ -151,7 +151,7 @@ class Model:
             self._out = None
 
     # ------------------------------------------------------------------ state of the units
-    CHECKPOINTED = {"reversals": ("rev_clock", "rev_period", "rev_count"), "slime": ("slime",)}
+    CHECKPOINTED = {"reversals": ("rev_clock", "rev_period", "rev_count", "rev_suppressed"), "slime": ("slime",)}
 
     def checkpoint_fields(self) -> dict:
         """Name -> field of every unit's state that a checkpoint must carry."""

@@ -29,6 +29,10 @@ from .launch import shape_for
 from .state import Layout, State, list_capacities
 
 
+# checkpoint fields newer than some checkpoints: an older checkpoint without them leaves them at 0
+ADDED_LATER = ("rev_suppressed",)
+
+
 class Simulation:
     def __init__(self, scene, positions: np.ndarray | None = None, engine_direction: np.ndarray | None = None,
                  loop_shape: str | None = None, **integrator_options):
@@ -119,7 +123,8 @@ class Simulation:
         done = np.asarray(st["rollbacks"]) if "rollbacks" in st else np.zeros((0, 3))
         self.rollbacks = [(int(a), float(b), int(c)) for a, b, c in done]
         for name, f in self._checkpointed().items():
-            f.from_numpy(st[name])
+            if name in st or name not in ADDED_LATER:
+                f.from_numpy(st[name])
         self.state.x_snap.from_numpy(st["x_snap"])
         self.state.snap_step = int(st["snap_step"])
         self.integrator.reset(restored=True)

@@ -1,7 +1,8 @@
 """Trajectories in the GSD file format with the HOOMD schema (readable by OVITO, HOOMD-blue, freud, MDAnalysis).
 
-Schema (see README "Trajectory format"):
-- configuration.box = [Lx, Ly, 1, 0, 0, 0] µm, dimensions = 2, step = integration step.
+Schema (docs/trajectory.md):
+- configuration.box = [Lx, Ly, 0, 0, 0, 0] µm (Lz = 0: HOOMD's 2D box, so freud takes it as 2D without a warning),
+  dimensions = 2, step = integration step; the file is readable by all, as the other outputs (mode 0666 - umask).
 - particles.position (Np, 3) float32: HOOMD convention, box centred at the origin, positions in [-L/2, L/2);
   particles.image (Np, 3) int32 so that position + image * L gives every cell's chain unwrapped.
   Particles are stored cell by cell: particle i belongs to cell i // N and is number i % N along it.
@@ -13,7 +14,7 @@ Schema (see README "Trajectory format"):
 - log/particles/speed_um_per_min (Np,) float32: particle speed averaged over the speed window (docs/model.md).
 - log/particles/engine_direction (Np,) int8: the cell's k_e (+1: particle 0 of the cell is the head).
 - log/bonds/strain_energy_J (Nb,) float32: per-segment strain energy, only when the scene asks for it.
-- log/taichimyxo/time_s (1,) float64: simulated time, s.
+- log/taichimyxo/time_s (1,) float64: simulated time, s (MDAnalysis: taichimyxo.interop.universe reads it).
 - log/taichimyxo/scene_json (frame 0 only): the fully resolved scene as UTF-8 JSON bytes (uint8 array).
 """
 from __future__ import annotations
@@ -53,6 +54,9 @@ class TrajectoryWriter:
             self._f = hoomd.open(self.path, "a")
             self._first = False
         else:
+            # gsd creates its files 0640 but keeps an existing file's mode: created here, the file follows the
+            # umask like every other output
+            os.close(os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666))
             self._f = hoomd.open(self.path, "w")
 
     def append(self, fr: Frame) -> None:
@@ -66,7 +70,7 @@ class TrajectoryWriter:
         img = np.floor((p + L / 2) / L).astype(np.int32)
         wrapped = p - img * L
         g = hoomd.Frame()
-        g.configuration.box = [float(L[0]), float(L[1]), 1.0, 0.0, 0.0, 0.0]
+        g.configuration.box = [float(L[0]), float(L[1]), 0.0, 0.0, 0.0, 0.0]
         g.configuration.dimensions = 2
         g.configuration.step = int(fr.step)
         g.particles.N = Np

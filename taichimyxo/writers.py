@@ -242,12 +242,18 @@ class ProgressLine(Writer):
         self.bar, self._run = None, None
 
     def start(self, run) -> None:
+        from .progress import starting_note
         self._run = run
-        self.bar = Progress(self.name, self.total, run.sim.scene.dt, run.step, stream=self.stream)
+        self.bar = Progress(self.name, self.total, run.sim.scene.dt, run.step, stream=self.stream,
+                            starting=starting_note(run.sim.scene))
         self.bar.update(run.step, force=True)
 
     def after_chunk(self, run) -> None:
-        self.bar.update(run.step)
+        first = self.bar.measured_from is None
+        self.bar.update(run.step, force=first)        # the first chunk compiled the kernels: say it is done
+        if first and self.bar.measured_from is not None:
+            from .progress import remember_first_chunk
+            remember_first_chunk(run.sim.scene, self.bar.first_chunk_seconds())
 
     def close(self) -> None:
         if self.bar is not None:
@@ -311,7 +317,8 @@ def run_summary(run, path: Path, files: dict, checkpoint, resumed: bool, setup_s
         "neighbour_rebuilds": sim.rebuilds, "arch": arch, "precision": scene.precision,
         "integrator": scene.integrator, "strain_logged": scene.strain,
         "files": {k: Path(v).name for k, v in files.items()},
-        "scene_values": scene.to_dict(),
+        # run.dt_ms as the run used it (0 in a scene file means the integrator's default)
+        "scene_values": {**scene.to_dict(), "run": {**scene.raw["run"], "dt_ms": scene.dt * 1e3}},
     }
     if scene.step_control == "error":       # steps taken, scene steps they covered, mean and current multiple
         summary["step_control"] = sim.solver_stats()

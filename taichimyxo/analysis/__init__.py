@@ -1,4 +1,4 @@
-"""Quantify what the movies show: clusters, rotating aggregates, speed and strain profiles (issue 6).
+"""Quantify what the movies show: clusters, rotating aggregates, speed and strain profiles.
 
 The paper's central testable prediction (Janulevicius et al. 2015, "Circular aggregates as rigid bodies"): aggregates
 formed by short-range guiding rotate as rigid bodies, so cell speed grows linearly with the distance from the centre,
@@ -29,7 +29,10 @@ aggregates in one frame), ``aggregate_measure`` (what is measured on each), ``tr
 merges, splits, dispersals, lifetimes; the size-independence regression), ``claims`` (the paper's claims table;
 ``claim_runs``: the runs it reads, ``claim_plots``: its figures),
 ``summary`` (a whole trajectory, the JSON), ``report`` (the text), ``plots`` (the PNGs), ``synthetic``
-(test data), ``stats`` (least squares, binomial tail).
+(test data), ``stats`` (least squares, binomial tail). The experimental measures (``analyze --measures``,
+docs/measures.md): ``measures`` (one pass: ``measure_frames``), ``defects`` (Q field, ±½ defects), ``cluster_sizes``
+(fits with a bootstrap), ``correlations`` (velocity and orientation correlations, MSD), ``events`` (reversal intervals,
+suppression, guiding links), ``measure_plots``, ``synthetic_measures`` (their test data).
 
 Everything is periodic (minimum image in the box (Lx, Ly)); positions are µm, speeds µm/min, times min.
 
@@ -48,6 +51,7 @@ censored by the start and end of the run (flagged per track).
 from .aggregates import find_aggregates
 from .claims import claims, format_claims
 from .clusters import cell_clusters, connected_components, contact_pairs
+from .measures import measure_frames
 from .params import DEFAULTS, PAPER
 from .report import format_summary
 from .summary import analyze, analyze_frames
@@ -55,4 +59,4 @@ from .synthetic import synthetic_frames, write_synthetic
 
 __all__ = ["DEFAULTS", "PAPER", "analyze", "analyze_frames", "cell_clusters", "claims", "format_claims",
            "connected_components", "contact_pairs",
-           "find_aggregates", "format_summary", "synthetic_frames", "write_synthetic"]
+           "find_aggregates", "format_summary", "measure_frames", "synthetic_frames", "write_synthetic"]

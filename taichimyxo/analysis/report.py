@@ -101,7 +101,9 @@ def format_measures(ms: dict) -> list[str]:
                      f"{_mean(d['n_plus_half']):.1f} +1/2, {_mean(d['n_minus_half']):.1f} -1/2; {d['n_tracks']} "
                      f"tracks, median lifetime {fmt(d['track_lifetime_min_median'], '.1f')} min")
     cs = ms["cluster_sizes"]
-    if cs.get("alpha") is not None:
+    if cs.get("alpha") is None:
+        lines.append(f"cluster sizes: {cs['n_clusters']} clusters of {len(cs['sizes'])} size(s): too few sizes to fit")
+    else:
         ci = cs.get("alpha_ci95") or [None, None]
         sc = fmt(cs["s_cut"], ".1f") if cs["s_cut"] else "none (pure power law)"
         lines.append(f"cluster sizes ({cs['n_clusters']} clusters): P(s) ~ s^-a exp(-s/s_c), a = {cs['alpha']:.2f} "
@@ -110,15 +112,19 @@ def format_measures(ms: dict) -> list[str]:
     for key, name in (("orientation_correlation", "orientation"), ("velocity_correlation", "velocity")):
         c = ms.get(key)
         if c:
-            lines.append(f"{name} correlation length {fmt(c['length_um'], '.1f')} µm (per-frame mean "
-                         f"{fmt(c['length_frame_mean_um'], '.1f')} ± {fmt(c['length_se_um'], '.1f')}, "
-                         f"{c['n_frames']} frames)")
+            ln = fmt(c["length_um"], ".1f") if c["length_um"] is not None else f"> {c['r_um'][-1]:.0f}"
+            lines.append(f"{name} correlation length {ln} µm (per-frame mean "
+                         f"{fmt(c['length_frame_mean_um'], '.1f')} ± {fmt(c['length_se_um'], '.1f')} over the "
+                         f"{c['n_frames_with_length']} of {c['n_frames']} frames where C falls below 1/e)")
     m = ms.get("msd")
     if m and m.get("exponent") is not None:
         lines.append(f"MSD exponent {m['exponent']:.2f} ± {fmt(m['exponent_se'], '.2f')} (lags up to "
                      f"{m['fit_max_lag_min']:.0f} min)")
     ev = ms.get("events")
-    if ev:
+    if ev and not ev["n_reversals"] + ev["n_suppressed"]:
+        lines.append(f"no reversals logged; guiding links formed {ev['n_links_formed']}, broken "
+                     f"{ev['n_links_broken']}, median duration {fmt(ev['link_duration_median_min'], '.2f')} min")
+    elif ev:
         lines.append(f"reversals: {ev['n_reversals']}, interval median {fmt(ev['interval_median_min'], '.1f')} min "
                      f"(mean {fmt(ev['interval_mean_min'], '.1f')}, CV {fmt(ev['interval_cv'])}); "
                      f"{fmt(None if ev['fraction_suppressed'] is None else 100 * ev['fraction_suppressed'], '.0f')} % "

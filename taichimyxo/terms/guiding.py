@@ -31,6 +31,8 @@ class HeadToTail:
         self.g_tail = state.vec(fb, C, state.fdt) if self.kind == "adhesion" else None
         # per cell, one flag per end (head and tail segments write their own: no atomics, no clearing pass)
         self.interacting = state.vec(fb, C, ti.i32) if self.suppression else None
+        # 1 + the cell whose tail this cell's head follows (nearest, gap below d_g), 0: none; read by the event log
+        self.leader = state.scalar(fb, C, ti.i32)
 
     @ti.func
     def pair(self, follower_seg, leader_seg):
@@ -78,6 +80,8 @@ class HeadToTail:
             gh = ti.Vector([0.0, 0.0], dt=st.fdt)
             gt = ti.Vector([0.0, 0.0], dt=st.fdt)
             inter = 0
+            lead = 0
+            best = ti.cast(self.d_g, st.fdt)
             # the cell's own tail segment is not listed for its head segment when they are adjacent (N=3)
             for q in range(nl.guide_n[row]):
                 t = nl.guide[row, q]
@@ -90,11 +94,16 @@ class HeadToTail:
                     gh += f
                     if g < self.d_g:
                         inter = 1
+                    if g < best or (g == best and lead > 0 and ct + 1 < lead):
+                        best = g
+                        lead = ct + 1
                 if is_tail and t == st.head_seg(ct):
                     f, g = self.pair(t, s)
                     gt -= f
                     if g < self.d_g:
                         inter = 1
+            if is_head:
+                self.leader[c] = lead
             if ti.static(self.kind != "none"):
                 if is_head:
                     self.g_head[c] = gh

@@ -33,6 +33,7 @@ class Reversals:
         self.rev_period = state.scalar(fb, C, ti.i32)     # this cycle's period, steps
         self.rev_count = state.scalar(fb, C, ti.i32)      # reversals so far (counter of the random stream)
         self.clock_held = state.scalar(fb, 1, ti.i32)     # 1: this step is a part of a split scene step
+        self.rev_suppressed = state.scalar(fb, C, ti.i32)  # reversals skipped by suppression so far (event log)
 
     @ti.func
     def draw_period(self, c, count):
@@ -66,6 +67,8 @@ class Reversals:
             skip = False
             if ti.static(self.suppressed):
                 skip = self.head_tail.interacts(c)
+                if skip:
+                    self.rev_suppressed[c] += 1
             if not skip:
                 st.ke[c] = -st.ke[c]
                 self.rev_count[c] += 1
