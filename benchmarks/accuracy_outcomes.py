@@ -111,8 +111,9 @@ def markdown(cmp: list[dict], reference: str) -> str:
     for c in cmp:
         vals = ", ".join(f"{v:.3g}" for v in c["values"])
         ag = "" if c["agrees"] is None else ("yes" if c["agrees"] else "**no**")
-        lines.append(f"| {c['setting']} | {c['outcome']} | {c['mean']:.3g} ± {c['sd']:.2g} ({c['seeds']}) | {vals} | "
-                     f"{c['ref_min']:.3g}–{c['ref_max']:.3g} | {c['diff_in_ref_sd']:+.2f} | {c['welch_t']:+.2f} | {ag} |")
+        lines.append(f"| {c['setting']} | {c['outcome']} | {c['mean']:.3g} ± {c['sd']:.2g} ({c['seeds']}) | "
+                     f"{vals} | {c['ref_min']:.3g}–{c['ref_max']:.3g} | {c['diff_in_ref_sd']:+.2f} | "
+                     f"{c['welch_t']:+.2f} | {ag} |")
     settings = list(dict.fromkeys(c["setting"] for c in cmp))
     lines.append("")
     for s in settings:

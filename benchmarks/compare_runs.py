@@ -69,10 +69,12 @@ def main(argv=None) -> int:
     print(f"{'':{w}}  " + "  ".join(f"{lab:>22}" for lab in labels))
     for k in keys:
         vals = [stats[lab][k] for lab in labels]
-        fmt = lambda v: (f"{v:22.3g}" if isinstance(v, float) else f"{str(v):>22}")
+        def fmt(v):
+            return (f"{v:22.3g}" if isinstance(v, float) else f"{str(v):>22}")
         print(f"{k:{w}}  " + "  ".join(fmt(v) for v in vals))
     if a.png:
         import imageio.v3 as iio
+
         from taichimyxo.render import render_frame
         imgs = [render_frame(fr, size=(1000, 1000)) for fr in frames]
         iio.imwrite(a.png, np.concatenate(imgs, axis=1))

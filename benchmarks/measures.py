@@ -15,7 +15,6 @@ import tempfile
 import time
 
 from benchlib import parser
-
 from taichimyxo.analysis.measures import measure_frames
 from taichimyxo.analysis.synthetic import write_synthetic
 from taichimyxo.trajectory import read_frames

@@ -20,8 +20,19 @@ from pathlib import Path
 
 import numpy as np
 
-from benchlib import DEFAULT_OUT, Method, Unstable, fmt, json_from_worker, make, parser, run, scene_for, steps, \
-    write_csv
+from benchlib import (
+    DEFAULT_OUT,
+    Method,
+    Unstable,
+    fmt,
+    json_from_worker,
+    make,
+    parser,
+    run,
+    scene_for,
+    steps,
+    write_csv,
+)
 
 PACKAGE_LIMITS = "taichimyxo/stability_limits.json"     # in a clone; a person copies the sweep's file here
 STAB_DT_MS = (0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 15.0, 20.0, 30.0, 50.0, 75.0, 100.0, 150.0, 200.0)

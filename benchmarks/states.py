@@ -124,6 +124,7 @@ def measure(steps: int, warm: int, names=None) -> list[dict]:
 def main() -> None:
     import json
     import os
+
     from benchlib import parser
     p = parser(__doc__)
     p.add_argument("--runs", default="benchmarks-results/bench_states",

@@ -44,8 +44,8 @@ def measure(name: str, scale: float, n_steps: int, warm: int, precision: str | N
 
 
 def main(quick: bool = False, out_dir: str = DEFAULT_OUT) -> list[dict]:
-    from taichimyxo import backend
     from states import measure as measure_states
+    from taichimyxo import backend
     backend.init("cpu")
     rows = []
     sizes = [1.0] if quick else [1.0, 0.5, 0.25]

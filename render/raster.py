@@ -46,8 +46,20 @@ import numpy as np
 # the layout and the capsules live in their own modules; their names stay importable from here
 from .capsules import OUTLINE_RGB, auto_outline, draw_capsules, periodic_copies  # noqa: F401
 from .colors import SPEED_MAX_UM_PER_MIN, make_scale
-from .layout import (FONT_PX_AT_1080, LONGEST_TIME, MIN_FONT_PX, TIME_FONT, Layout, Viewport,  # noqa: F401
-                     glyph_width, legend_metrics, compute_layout, font_size_px, nice_scalebar_length, text_extent)
+from .layout import (  # noqa: F401
+    FONT_PX_AT_1080,
+    LONGEST_TIME,
+    MIN_FONT_PX,
+    TIME_FONT,
+    Layout,
+    Viewport,
+    compute_layout,
+    font_size_px,
+    glyph_width,
+    legend_metrics,
+    nice_scalebar_length,
+    text_extent,
+)
 
 BACKGROUNDS = {
     "white": ((255, 255, 255), (0, 0, 0), (170, 170, 170)),   # background, text, box outline

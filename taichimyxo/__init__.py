@@ -21,7 +21,8 @@ _os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "false")   # keep stdout fo
 # name -> module that defines it (imported on first use)
 _LAZY = {
     "load_scene": "api", "Simulation": "api", "run": "api", "render_frame": "api", "render_movie": "api",
-    "run_scene": "api", "analyze": "api", "claims": "api", "Periodic": "triggers", "WallClock": "triggers", "Frame": "frame", "Scene": "scene",
+    "run_scene": "api", "analyze": "api", "claims": "api", "Periodic": "triggers", "WallClock": "triggers",
+    "Frame": "frame", "Scene": "scene",
     "SceneError": "scene", "Run": "driver", "drive": "driver", "load_sweep": "sweep", "run_sweep": "sweep",
 }
 _SUBMODULES = ("writers", "triggers", "driver", "api", "render", "trajectory")

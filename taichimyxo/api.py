@@ -157,7 +157,8 @@ def claims(trajectories, out_dir=None, *, every: int = 1, v_b: float | None = No
     seen = {}
     for p in paths:          # one run counted twice would weigh twice in every claim it enters
         if os.path.realpath(p) in seen:
-            raise TrajectoryError(f"claims: {p} is given twice (also as {seen[os.path.realpath(p)]}); give each run once")
+            raise TrajectoryError(f"claims: {p} is given twice (also as {seen[os.path.realpath(p)]}); "
+                                  "give each run once")
         seen[os.path.realpath(p)] = p
     for p in paths:
         check_trajectory(p)

@@ -81,7 +81,8 @@ def measure(name: str, area: float, steps: int, warm: int, run: dict | None = No
         setup = time.perf_counter() - t0              # placement, fields, compiling, warm steps
         t = time_steps(sim, steps, 0)
         row = {"scene": name, "state": state, "area": area, "box_um": f"{sc.box[0]:g}x{sc.box[1]:g}",
-               "cells": sc.n_cells, "particles": sim.n_p, "precision": sc.precision, "integrator": sc.integrator, "dt_ms": sc.dt * 1e3,
+               "cells": sc.n_cells, "particles": sim.n_p, "precision": sc.precision, "integrator": sc.integrator,
+               "dt_ms": sc.dt * 1e3,
                "steps": steps, "wall_s": t["wall_s"], "ms_per_step": t["ms_per_step"],
                "steps_per_s": round(steps / t["wall_s"], 1) if t["wall_s"] else float("inf"),
                "particle_steps_per_s": round(t["particle_steps_per_s"]),

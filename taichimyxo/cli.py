@@ -9,9 +9,8 @@ import argparse
 import os
 import sys
 
+from .cli_sweep import EXIT_INTERRUPTED, EXIT_RUN_FAILED, cmd_sweep, executor_arguments, executor_options, positive_int  # noqa: F401
 from .scene import SCHEMA, Scene, SceneError, available_scenes, parse_set, to_toml, toml_value
-from .cli_sweep import (EXIT_INTERRUPTED, EXIT_RUN_FAILED, cmd_sweep, executor_arguments,  # noqa: F401
-                        executor_options, positive_int)
 from .trajectory import TrajectoryError
 
 EXIT_BAD_INPUT = 2
@@ -35,7 +34,8 @@ ARCHES = ("cpu", "cuda", "vulkan", "metal", "gpu")       # as backend.init accep
 def version() -> str:
     """The installed distribution's version (a wheel, or an editable clone), else the package's own."""
     try:
-        from importlib.metadata import PackageNotFoundError, version as dist_version
+        from importlib.metadata import PackageNotFoundError
+        from importlib.metadata import version as dist_version
         return dist_version("taichimyxo")
     except PackageNotFoundError:
         from . import __version__

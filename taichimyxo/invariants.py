@@ -33,7 +33,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .geometry import closest_points, contact_energy, min_image
-from .terms.bending import bend_angles, energy as bend_energy  # noqa: F401  (bend_angles: API)
+from .terms.bending import bend_angles  # noqa: F401  (bend_angles: API)
+from .terms.bending import energy as bend_energy
 from .terms.springs import energy as spring_energy
 
 

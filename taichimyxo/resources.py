@@ -3,7 +3,8 @@
 A scene that validates can still be far too large for the machine (a 10^6 µm domain at the paper's density holds
 5 x 10^10 cells): without this check numpy or Taichi dies minutes later with a traceback ('Unable to allocate
 5.82 TiB'). `check_resources(scene)` estimates the memory of every field a Simulation allocates (the same sizes
-as the Simulation's parts, tested against Simulation.allocated_fields), of the start's placement and of the per-frame copies, and
+as the Simulation's parts, tested against Simulation.allocated_fields), of the start's placement and of the per-frame
+copies, and
 refuses the run with one line when it exceeds the memory available, or when a field would have more entries than
 Taichi's 32-bit field indices address."""
 from __future__ import annotations

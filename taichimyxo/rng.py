@@ -78,7 +78,8 @@ def hash_u32_np(x):
 def uniform_ti_np(seed, stream, index, counter):
     """Numpy twin of `uniform_ti` (for tests of reversal statistics)."""
     m = np.uint64(0xFFFFFFFF)
-    u = lambda v: np.asarray(v, dtype=np.uint64) & m
+    def u(v):
+        return np.asarray(v, dtype=np.uint64) & m
     h = hash_u32_np((u(seed) * np.uint64(0x9E3779B9) & m) ^ hash_u32_np(u(stream) + np.uint64(0x632BE5AB)))
     h = hash_u32_np(h ^ hash_u32_np(u(index) + np.uint64(0x85EBCA6B)))
     h = hash_u32_np(h ^ hash_u32_np(u(counter) + np.uint64(0xC2B2AE35)))

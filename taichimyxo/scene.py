@@ -13,12 +13,11 @@ import json
 import tomllib
 from dataclasses import dataclass, field
 
-# the schema (every key, its default and check) and its errors; re-exported: `from taichimyxo.scene import SCHEMA`
-from .schema import (SCHEMA, STIFFNESS_NAMES, SceneError, defaults, merge, parse_set,  # noqa: F401
-                     to_toml, toml_value)
 from .catalogue import SCENES_DIR, available_scenes, resolve_path  # noqa: F401  (re-exported)
-from .stability import default_dt_ms
 
+# the schema (every key, its default and check) and its errors; re-exported: `from taichimyxo.scene import SCHEMA`
+from .schema import SCHEMA, STIFFNESS_NAMES, SceneError, defaults, merge, parse_set, to_toml, toml_value  # noqa: F401
+from .stability import default_dt_ms
 
 # The densest random start placed reliably and in bounded time (init.py, "Random sequential placement": above
 # 0.40 the tries per cell climb from hundreds to thousands, and past 0.44 placement stalls).

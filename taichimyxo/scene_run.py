@@ -1,6 +1,7 @@
 """Running a scene: the writers a scene asks for (taichimyxo.writers: movie, trajectory, summary, checkpoint, the
 invariant check, a progress line), built from the scene and the command line's options and driven by
-taichimyxo.driver.drive; clean interruption (SIGINT/SIGTERM close every file and write a checkpoint), --resume, and a check of the
+taichimyxo.driver.drive; clean interruption (SIGINT/SIGTERM close every file and write a checkpoint), --resume, and a
+check of the
 numerical invariants at every frame (a run that breaks them stops, keeping what it wrote, and says why).
 
 Outputs in the output folder, for scene NAME:
@@ -26,8 +27,18 @@ from .outdir import OutputError, check_out_folder, outputs, plan_run, read_summa
 from .progress import duration
 from .scene import Scene, SceneError
 from .triggers import Periodic, WallClock
-from .writers import (SUMMARY_VERSION, Checkpoint, FigurePanel, InvariantCheck, Movie, ProgressLine, Summary,
-                      Trajectory, read_checkpoint, scene_render_options)
+from .writers import (
+    SUMMARY_VERSION,
+    Checkpoint,
+    FigurePanel,
+    InvariantCheck,
+    Movie,
+    ProgressLine,
+    Summary,
+    Trajectory,
+    read_checkpoint,
+    scene_render_options,
+)
 
 
 def check_output_dir(out_dir: str) -> Path:

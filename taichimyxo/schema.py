@@ -182,13 +182,14 @@ def _check_value(sec: str, key: str, val):
 def merge(base: dict, over: dict, where: str) -> None:
     for sec, body in over.items():
         if sec not in SCHEMA:
-            raise SceneError(f"{where}: unknown section [{sec}]{did_you_mean(sec, SCHEMA)}; allowed: {', '.join(SCHEMA)}")
+            raise SceneError(f"{where}: unknown section [{sec}]{did_you_mean(sec, SCHEMA)}; "
+                             f"allowed: {', '.join(SCHEMA)}")
         if not isinstance(body, dict):
             raise SceneError(f"{where}: [{sec}] must be a table")
         for key, val in body.items():
             if key not in SCHEMA[sec]:
-                raise SceneError(f"{where}: unknown key {sec}.{key}{did_you_mean(key, SCHEMA[sec])}; allowed in [{sec}]: "
-                                 f"{', '.join(SCHEMA[sec])}")
+                raise SceneError(f"{where}: unknown key {sec}.{key}{did_you_mean(key, SCHEMA[sec])}; "
+                                 f"allowed in [{sec}]: {', '.join(SCHEMA[sec])}")
             base[sec][key] = _check_value(sec, key, val)
 
 
@@ -204,7 +205,8 @@ def parse_set(items: list[str]) -> dict:
             raise SceneError(f"--set {key!r}: expected a dotted key SECTION.KEY, e.g. cell.k_a_N_m")
         sec, k = key.split(".")
         if sec not in SCHEMA or k not in SCHEMA[sec]:
-            raise SceneError(f"--set {key}: unknown key{did_you_mean(key, all_keys())}; see `python -m taichimyxo keys`")
+            raise SceneError(f"--set {key}: unknown key{did_you_mean(key, all_keys())}; "
+                             "see `python -m taichimyxo keys`")
         try:
             val = tomllib.loads(f"v = {raw.strip()}")["v"]
         except tomllib.TOMLDecodeError:

@@ -23,11 +23,10 @@ import taichi as ti
 from . import backend
 from .frame import Frame
 from .integrators import make_integrator, records_contacts
+from .launch import shape_for
 from .model import Model, field_bytes, fields_of
 from .neighbours import NeighbourList, NeighbourOverflow  # noqa: F401  (NeighbourOverflow: API)
-from .launch import shape_for
 from .state import Layout, State, list_capacities
-
 
 # checkpoint fields newer than some checkpoints: an older checkpoint without them leaves them at 0
 ADDED_LATER = ("rev_suppressed",)

@@ -67,7 +67,7 @@ def sim_with(positions, ke=None, box=(20.0, 20.0), **sections):
     return make_simulation(build_small_scene(len(pos), box=box, **sections), positions=pos, engine_direction=ke)
 
 
-# ---------------------------------------------------------------- numpy reference energies (docs/model.md terms 1, 2, 4)
+# --------------------------------------------------------------- numpy reference energies (docs/model.md terms 1, 2, 4)
 # each lives with its term; the contact energy is written from the definition (sample to nearest point of each other
 # chain, global minimum), without the kernels' local nearest-segment rule
 from taichimyxo.terms.bending import energy as bend_energy  # noqa: E402,F401

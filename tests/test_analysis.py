@@ -1,4 +1,4 @@
-"""Analysis (issue 6) on synthetic trajectories with known answers, written with TrajectoryWriter."""
+"""Analysis on synthetic trajectories with known answers, written with TrajectoryWriter."""
 from __future__ import annotations
 
 import json
@@ -9,13 +9,21 @@ import time
 import numpy as np
 import pytest
 
-from taichimyxo.analysis import (analyze, cell_clusters, connected_components, contact_pairs, find_aggregates,
-                                 format_summary, synthetic_frames, write_synthetic)
+from taichimyxo.analysis import (
+    analyze,
+    cell_clusters,
+    connected_components,
+    contact_pairs,
+    find_aggregates,
+    format_summary,
+    synthetic_frames,
+    write_synthetic,
+)
+from taichimyxo.analysis.params import parameters
+from taichimyxo.analysis.summary import detected_aggregates
 from taichimyxo.cli import main as cli_main
 from taichimyxo.frame import Frame
 from taichimyxo.geometry import min_image
-from taichimyxo.analysis.params import parameters
-from taichimyxo.analysis.summary import detected_aggregates
 
 V_B = 4.0
 
@@ -183,7 +191,7 @@ def test_non_circulating_dense_blob_and_arc_are_rejected():
     assert find_aggregates(half) == []
 
 
-# ------------------------------------------------------------------------ issue 13: aggregates as a person sees them
+# ------------------------------------------------------------------------ aggregates as a person sees them
 def _match(aggs, centre, L=(100.0, 100.0)):
     d = [_pdist(a["centre_um"], centre, L) for a in aggs]
     return (aggs[int(np.argmin(d))], min(d)) if d else (None, float("inf"))
@@ -308,7 +316,7 @@ def _frame_agreement():
 def test_labelled_real_frames():
     """Frames of S3 (active following), S2 (passive following), S4 (adhesion), S10 (spiral start), S13 (dense,
     aligned, active following) and S17 (slime trails) whose aggregates were counted and outlined by eye
-    (tests/data/labelled_frames.json, made without the detector's output). Agreement as issue 13 asks: the count
+    (tests/data/labelled_frames.json, made without the detector's output). Agreement: the count
     within one and every aggregate a person is sure of found with its centre within 4 W = 2 µm (at most one of them
     missed; detections where the person was unsure count for neither side).
 
@@ -462,7 +470,7 @@ def test_first_frame_without_speeds_is_geometry_only(tmp_path):
     assert t["mean_omega_rad_per_min"] == pytest.approx(0.8, rel=1e-3)
 
 
-# ------------------------------------------------------------------------------------------------ tracking (issue 13)
+# ------------------------------------------------------------------------------------------------ tracking
 EVENT_DISKS = [
     dict(centre=(25.0, 30.0), radius=7.25, omega=0.6, pool="m", t_off_min=4),          # A } merge at t = 4
     dict(centre=(45.0, 30.0), radius=7.25, omega=0.6, pool="m", t_off_min=4),          # B }
@@ -544,14 +552,15 @@ def test_link_tracks_bridges_gaps_and_needs_overlap():
     assert st["fraction_aggregate_frames_long_lived"] == 1.0 and st["median_lifetime_min"] == 1.0
     # found as two pieces for one frame, then whole again: the elder track continues (a split, then a merge back)
     piece_a, piece_b = list(range(10)) + list(range(30, 35)), list(range(10, 20))
-    tracks, events = link_tracks([[agg(0, big)], [agg(1, piece_a), agg(1, piece_b)], [agg(2, list(range(5)) + piece_b)]],
+    tracks, events = link_tracks([[agg(0, big)], [agg(1, piece_a), agg(1, piece_b)],
+                                  [agg(2, list(range(5)) + piece_b)]],
                                  [0.0, 1.0, 2.0])
     assert [len(t["frames"]) for t in tracks] == [3, 1] and [e["type"] for e in events] == ["split", "merge"]
     assert tracks[1]["end"] == "merge" and tracks[1]["merged_into"] == 0
 
 
 def test_report_prints_the_rigidity_exponent():
-    # one rigidity measure in the table and the text (issue 26): the rigidity exponent, not an R²
+    # one rigidity measure in the table and the text: the rigidity exponent, not an R²
     disk = dict(centre=(50.0, 50.0), radius=8.25, omega=0.8)
     s = analyze_frames_public(synthetic_frames(box=(100.0, 100.0), n_frames=2, disks=[disk], jitter_deg=8,
                                                speed_noise=0.1, seed=2))
@@ -572,7 +581,7 @@ def analyze_frames_public(frames):
     return out
 
 
-# ------------------------------------------------------------------------------------------------ claims (issue 13)
+# ------------------------------------------------------------------------------------------------ claims
 def _claims_runs(tmp_path):
     """Three small runs standing for the paper's: active following (aggregates with the edge at 2 v_b, whatever
     their size, living 11 min, strain inside), passive following (an aggregate living 1 min) and non-guided (gas)."""

@@ -85,7 +85,8 @@ def test_side_by_side_force_is_continuous_in_tilt_and_stagger(pair_sim):
 
 def test_parallel_force_per_overlap_length(pair_sim):
     """Exactly parallel: k_c (W - d) per l0 of overlap, plus about one contact for the two ends of the overlap (the
-    poles' extra weight and the samples' fence posts; 0.96-1.07 with the stagger): the numbers docs/decisions.md states."""
+    poles' extra weight and the samples' fence posts; 0.96-1.07 with the stagger): the numbers docs/decisions.md
+    states."""
     for st in (0.0, 0.25 * L0, 0.5 * L0, L0):
         pos, overlap = side_by_side(0.0, st)
         fy = contact_on(pair_sim, pos)[1, :, 1].sum()
@@ -146,7 +147,8 @@ def test_sliding_along_a_straight_neighbour_feels_no_tangential_force(sim64, m):
     fy = fc[1, :, 1].sum()
     np.testing.assert_allclose(fc[:, :, 0], 0.0, atol=1e-9 * fy)
     # samples (every l0/2) of each cell lying over the other's extent, with their weights
-    xs = lambda c: np.concatenate([c[:, 0], 0.5 * (c[1:, 0] + c[:-1, 0])])
+    def xs(c):
+        return np.concatenate([c[:, 0], 0.5 * (c[1:, 0] + c[:-1, 0])])
     ws = np.concatenate([[0.5], np.full(6, 0.25), [0.5], np.full(7, 0.25)])
     a, b = pos
     over_b = (xs(a) >= b[:, 0].min() - 1e-12) & (xs(a) <= b[:, 0].max() + 1e-12)

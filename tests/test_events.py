@@ -1,4 +1,4 @@
-"""Per-cell events (issue 29): the event table of a tiny run against the polarity flips in its frames, the reader,
+"""Per-cell events: the event table of a tiny run against the polarity flips in its frames, the reader,
 and the statistics analyze reports."""
 import numpy as np
 import pytest
@@ -34,9 +34,8 @@ def test_event_stats_intervals_suppression_and_links():
 
 
 def test_logged_reversals_are_the_polarity_flips_in_the_frames(tmp_path):
-    from simtools import build_small_scene
-
     import taichimyxo as tm
+    from simtools import build_small_scene
     from taichimyxo.event_log import EventLog
     from taichimyxo.simulation import make_simulation
     from taichimyxo.trajectory import read_frames

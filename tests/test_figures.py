@@ -1,5 +1,5 @@
-"""Issue 27 (the paper's figures; the stiffness series; claims measured as the paper defines them) and issue 26
-item 5 (one rigidity measure; 'not measurable here').
+"""The paper's figures; the stiffness series; claims measured as the paper defines them; one rigidity measure;
+'not measurable here'.
 
 - `figures`: bad input (unknown figure, a scale that leaves too few cells, --no-run with runs missing) is one line,
   exit 2, nothing written; --dry-run counts runs, simulated hours and the estimated wall time and writes nothing.
@@ -13,7 +13,6 @@ item 5 (one rigidity measure; 'not measurable here').
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import pytest
 
@@ -128,7 +127,7 @@ def test_composite_from_tiny_runs_with_stiffness_series(tmp_path):
 
 # ------------------------------------------------------------------------------------------------ rigidity
 def test_cells_all_at_v_b_on_circles_are_not_rigid():
-    """The flow of issue 27: every cell at v_b on circles, no rigidity at all. The vector R² of v = ω × (r − c)
+    """Every cell at v_b on circles, no rigidity at all. The vector R² of v = ω × (r − c)
     passes it and ω R is 1.3 v_b; the rigidity exponent fails it, and the edge speed is v_b."""
     for radius in (4.25, 10.25):
         disk = dict(centre=(50.0, 50.0), radius=radius, omega=1.0, speed=V_B)
@@ -211,4 +210,5 @@ def test_stiffness_statements_judged_and_not_measurable():
     short = _records("active", {1e-18: act(12, 8, 0.5), 1e-17: act(6, 20, 0.5), 1e-16: act(3, 40, 0.4)}, hours=0.17)
     rows = {r["id"]: r for r in stiffness_rows(short)}
     assert rows["stiffness_aggregates_larger_fewer"]["status"].startswith("not measurable here: runs of 10 simulated")
-    assert rows["stiffness_very_rigid_none"]["status"].startswith("not measurable here: needs active runs at k_a = 1e-15")
+    assert rows["stiffness_very_rigid_none"]["status"].startswith("not measurable here: needs active runs at "
+                                                                  "k_a = 1e-15")

@@ -1,4 +1,4 @@
-"""Issue 26: every command takes --out alike, progress is honest from the first line, the example sweep ships and
+"""Every command takes --out alike, progress is honest from the first line, the example sweep ships and
 shows something, preview movies can be watched, and the small things of a first hour with the tool.
 
 --out, for every command: a new folder is created, an existing one is used, a file and a folder that cannot be
@@ -8,7 +8,6 @@ nothing here compiles a kernel."""
 from __future__ import annotations
 
 import io
-import json
 import stat
 import tomllib
 import warnings
@@ -135,7 +134,8 @@ def test_progress_gives_no_time_left_until_the_rate_is_measured_after_compiling(
 # ------------------------------------------------------------------------------------------------ example sweep
 def test_the_example_sweep_is_found_by_name_and_ships_in_the_wheel(capsys):
     conf = tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["setuptools"]
-    assert conf["package-dir"]["taichimyxo.sweeps"] == "sweeps" and "*.toml" in conf["package-data"]["taichimyxo.sweeps"]
+    assert (conf["package-dir"]["taichimyxo.sweeps"] == "sweeps"
+            and "*.toml" in conf["package-data"]["taichimyxo.sweeps"])
     assert main(["sweep", "example", "--dry-run"]) == 0
     out = capsys.readouterr().out
     assert "guiding.kind=none" in out and "guiding.kind=active" in out

@@ -14,8 +14,8 @@ import sys
 
 import numpy as np
 import pytest
-
 from backend_compare import Backend, compare
+
 from simtools import build_small_scene, cell
 
 CPU = Backend("cpu", "cpu")
@@ -93,6 +93,7 @@ def test_the_run_loop_copies_to_the_host_only_where_a_writer_fires(monkeypatch):
     rebuild flag the step kernel returns."""
     import taichi as ti
     from backend_compare import start_backend
+
     from taichimyxo.driver import drive
     from taichimyxo.simulation import Simulation
     from taichimyxo.triggers import Periodic
@@ -173,6 +174,7 @@ def test_cuda_implicit_step_equals_the_cpu_within_tolerance(cuda):
 def test_cuda_free_cell_moves_at_v_b(cuda, precision):
     """A free straight cell moves at v_b = 4 µm/min along its axis on CUDA (tests/test_forces.py's check)."""
     from backend_compare import report, start_backend
+
     from taichimyxo.simulation import Simulation
     scene = build_small_scene(1, run={"precision": precision, "dt_ms": 1.0})
     start_backend(CUDA, precision)

@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 
 from simtools import arc_cell, build_small_scene, cell
-
 from taichimyxo.simulation import Simulation
 from taichimyxo.terms.bending import bend_angles
 

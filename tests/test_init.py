@@ -6,8 +6,7 @@ import sys
 import numpy as np
 import pytest
 
-from taichimyxo.geometry import sample_polyline_contacts
-from taichimyxo.geometry import closest_points, min_image
+from taichimyxo.geometry import closest_points, min_image, sample_polyline_contacts
 from taichimyxo.init import initial_configuration
 from taichimyxo.scene import Scene
 
@@ -59,7 +58,8 @@ def test_spiral_start_cells_head_to_tail():
     # leaders inward (the paper's S5 Fig): every head is nearer the axis than its own tail, and every trailing cell
     # is further from the axis than its leader
     axis = np.array(sc.box) / 2
-    r = lambda p: np.linalg.norm(p - axis, axis=-1)
+    def r(p):
+        return np.linalg.norm(p - axis, axis=-1)
     assert np.all(r(heads) < r(tails))
     assert np.all(np.diff(r(pos.mean(axis=1))) > 0)
     seg = np.linalg.norm(np.diff(pos, axis=1), axis=-1)

@@ -1,4 +1,4 @@
-"""Issue 5, part 4: an interrupted run loses nothing.
+"""An interrupted run loses nothing.
 
 SIGINT / SIGTERM (or run_scene's stop_after_steps, which takes the same path) closes the trajectory and the movie so
 both stay readable, and writes a checkpoint; --resume continues it, and on the CPU the resumed run is bit for bit the
@@ -140,7 +140,8 @@ def test_interrupted_movie_is_readable_and_resumes(ti_cpu, tmp_path):
 # ------------------------------------------------------------------------------------------------ a real signal
 def _cmd(out, *extra):
     return [sys.executable, "-m", "taichimyxo", "scene", "S1", "--out", str(out), "--seed", "5",
-            "--set", "domain.width_um=20", "--set", "domain.height_um=20", "--set", "run.dt_ms=1", "--frame-minutes", "0.02", *extra]
+            "--set", "domain.width_um=20", "--set", "domain.height_um=20", "--set", "run.dt_ms=1",
+            "--frame-minutes", "0.02", *extra]
 
 
 ENV = dict(os.environ, TAICHIMYXO_THREADS="2", PYTHONUNBUFFERED="1")

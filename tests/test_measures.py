@@ -1,4 +1,4 @@
-"""The experimental measures (issue 29) on synthetic data with known answers: defects, cluster sizes, correlations,
+"""The experimental measures on synthetic data with known answers: defects, cluster sizes, correlations,
 MSD; numpy only, no simulation."""
 import math
 
@@ -8,11 +8,23 @@ from scipy.special import hyp2f1
 
 from taichimyxo.analysis.cluster_sizes import size_distribution
 from taichimyxo.analysis.clusters import cell_clusters
-from taichimyxo.analysis.correlations import (average_correlations, frame_correlations, msd, uniform_prefix,
-                                              unwrap_tracks)
+from taichimyxo.analysis.correlations import (
+    average_correlations,
+    frame_correlations,
+    msd,
+    uniform_prefix,
+    unwrap_tracks,
+)
 from taichimyxo.analysis.defects import find_defects, orientation_field, track_defects
-from taichimyxo.analysis.synthetic_measures import (clusters_of_sizes, defect_rods, exponential_sizes, gaussian_field,
-                                                    power_law_cutoff_sizes, sample_grid, walkers)
+from taichimyxo.analysis.synthetic_measures import (
+    clusters_of_sizes,
+    defect_rods,
+    exponential_sizes,
+    gaussian_field,
+    power_law_cutoff_sizes,
+    sample_grid,
+    walkers,
+)
 from taichimyxo.geometry import min_image
 
 BOX = np.array([100.0, 100.0])

@@ -1,4 +1,4 @@
-"""Issue 26, item 1: no command destroys a run's work without being told to.
+"""No command destroys a run's work without being told to.
 
 Every way a run can end leaves its files in the output folder; running the same command again, without a flag, never
 overwrites them: an unfinished run (a checkpoint, or a trajectory without a finished summary) is refused in one line

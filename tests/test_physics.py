@@ -118,7 +118,8 @@ def test_slime_is_overwritten_by_the_latest_cell_and_persists():
     """Two cells each run along an older trail laid the other way (antiparallel: it exerts no steering force, whose
     normal component is zero): each rear particle overwrites the elements it passes with its own tangent, and
     every element no rear passes keeps its old vector (MODEL.md term 6: trails persist until overwritten)."""
-    ix = lambda x: int(math.floor(x / 0.25))
+    def ix(x):
+        return int(math.floor(x / 0.25))
     ya, xb = 10.125, 15.125                       # element centres, so round-off cannot move a rear off the row
     a = cell((4.0, ya), 180.0)                    # moving +x along the row, rear from x = 1.75 to 5.75 in 60 s
     b = cell((xb, 12.0), 90.0)                    # moving -y along the column, rear from y = 14.25 to 10.25
@@ -231,8 +232,8 @@ def test_contact_list_never_misses_a_contact_in_a_dense_run():
 def test_displayed_speed_window_opens_at_the_previous_frame_when_frames_are_closer(tmp_path):
     """Frames every 3 s with a 10 s speed window: the window opens at the previous frame (so the speed is over the
     last 3 s), not at step 0 (the old behaviour: the net displacement since the start)."""
-    from taichimyxo.scene_run import run_scene
     from taichimyxo.scene import Scene
+    from taichimyxo.scene_run import run_scene
     sc = Scene.from_dict({"scene": {"name": "win"}, "domain": {"width_um": 20.0, "height_um": 20.0},
                           "population": {"cells": 1},
                           "run": {"hours": 0.01, "dt_ms": 2.0, "speed_window_s": 10.0},

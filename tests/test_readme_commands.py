@@ -16,7 +16,6 @@ import sys
 import tomllib
 from pathlib import Path
 
-
 REPO = Path(__file__).resolve().parent.parent
 INSTALL = "python3 -m venv .venv && .venv/bin/pip install -e '.[test]' && "
 TEST_COMMAND = ".venv/bin/python -m pytest"

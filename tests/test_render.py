@@ -6,8 +6,17 @@ import numpy as np
 import pytest
 
 from taichimyxo.frame import Frame
-from taichimyxo.render import (Renderer, VideoWriteError, VideoWriter, render_frame, render_trajectory,
-                               speed_scale, strain_scale, verify_video, write_png)
+from taichimyxo.render import (
+    Renderer,
+    VideoWriteError,
+    VideoWriter,
+    render_frame,
+    render_trajectory,
+    speed_scale,
+    strain_scale,
+    verify_video,
+    write_png,
+)
 from taichimyxo.render.raster import format_time, get_renderer, nice_scalebar_length
 from taichimyxo.render.video import even_size
 
@@ -265,6 +274,7 @@ def test_write_png_is_the_rendered_image(tmp_path):
 
 def test_render_trajectory_equals_render_frame(tmp_path):
     import imageio.v3 as iio
+
     from taichimyxo.trajectory import TrajectoryWriter, read_frames
 
     # positions on a 1/64 µm grid, float32 speeds and strain: the GSD round trip is exact

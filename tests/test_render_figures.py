@@ -10,11 +10,27 @@ import numpy as np
 import pytest
 
 from taichimyxo.frame import Frame
-from taichimyxo.render import (PNG_SIZE, VideoWriter, compute_layout, frame_size, make_scale, render_frame,
-                               render_trajectory, verify_video, write_png)
+from taichimyxo.render import (
+    PNG_SIZE,
+    VideoWriter,
+    compute_layout,
+    frame_size,
+    make_scale,
+    render_frame,
+    render_trajectory,
+    verify_video,
+    write_png,
+)
 from taichimyxo.render.colors import POLARITY_RGB, identity_colors
-from taichimyxo.render.raster import (LONGEST_TIME, TIME_FONT, glyph_width, legend_metrics, cell_axis_angle_deg,
-                                      get_renderer, text_extent)
+from taichimyxo.render.raster import (
+    LONGEST_TIME,
+    TIME_FONT,
+    cell_axis_angle_deg,
+    get_renderer,
+    glyph_width,
+    legend_metrics,
+    text_extent,
+)
 
 TURBO = matplotlib.colormaps["turbo"]
 BOX = (20.0, 20.0)
@@ -289,6 +305,7 @@ def test_scene_panel_and_render_panel_are_the_same(tmp_path):
     """run.py writes NAME.png with write_png(last frame, title=name); `render` writes the last frame of the
     trajectory with write_png through render_trajectory: same function, size and labels."""
     import imageio.v3 as iio
+
     from taichimyxo.trajectory import TrajectoryWriter
 
     frames = _moving_frames(3, box=(40.0, 40.0))

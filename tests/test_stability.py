@@ -223,8 +223,8 @@ def test_particles_faster_than_5_vb_are_physical(small_scene, make_sim, case):
 
 
 def test_hairpin_self_contact_of_segments_k_and_k_plus_2(small_scene, make_sim):
-    """docs/model.md term 4: non-adjacent segments of one cell collide. Head segment folded back by 170 degrees: segments
-    0 and 2 are 0.11 µm apart (< W), so there must be a contact force."""
+    """docs/model.md term 4: non-adjacent segments of one cell collide. Head segment folded back by 170 degrees:
+    segments 0 and 2 are 0.11 µm apart (< W), so there must be a contact force."""
     sc = small_scene(1)
     pos = cell((10.0, 10.0), 0.0, N, L0)
     pos[0] = pos[1] + L0 * np.array([math.cos(math.radians(10)), math.sin(math.radians(10))])

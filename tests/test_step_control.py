@@ -1,6 +1,6 @@
 """The step-size controller, run.step_control = "error" (taichimyxo/integrators/step_control.py): the rule, a free
-cell at the longest step with its clock exact, a guiding pull's onset that shortens the steps, reversal clocks in scene steps,
-and the combinations refused at load. 1 and 2 threads (test_init.py) and --resume (test_interrupt.py) are tested
+cell at the longest step with its clock exact, a guiding pull's onset that shortens the steps, reversal clocks in scene
+steps, and the combinations refused at load. 1 and 2 threads (test_init.py) and --resume (test_interrupt.py) are tested
 with the other effects."""
 import math
 

@@ -1,4 +1,4 @@
-"""Issue 11: ensembles and parameter sweeps from one file (taichimyxo.sweep), the local executor and `videos --jobs`.
+"""Ensembles and parameter sweeps from one file (taichimyxo.sweep), the local executor and `videos --jobs`.
 
 - A sweep file expands into grid points x seeds with readable names, short keys and self-contained run folders;
   scale keeps the density; sweeps/stiffness.toml is exactly the S2 Fig / S3 Fig scenes at half scale.
@@ -190,6 +190,7 @@ def test_collect_writes_a_row_per_run_and_a_plot_per_swept_key(tmp_path):
 
 def test_progress_counts_runs_and_estimates_the_time_left():
     import io
+
     from taichimyxo.sweep.progress import SweepProgress
     s = io.StringIO()
     pr = SweepProgress("sw", total=5, skipped=1, jobs=2, stream=s)
@@ -230,6 +231,7 @@ def test_local_executor_keeps_jobs_runs_going(tmp_path, monkeypatch):
     stand-ins that end after a fixed number of polls, so this is about the executor's order, not about clocks (the
     real-run test below runs real workers)."""
     import subprocess
+
     from taichimyxo.sweep import local
 
     running, most, launched = [], [0], []

@@ -64,6 +64,7 @@ def test_velocities_are_stored_and_their_norms_are_the_speeds(run_with_movie):
     """particles/velocity (µm/min, HOOMD schema) in every frame after the first: the displacement over the speed
     window, whose norm is log/particles/speed_um_per_min, and what the frames read back carry."""
     import gsd.hoomd
+
     from taichimyxo.trajectory import read_frames
     sc, out, _ = run_with_movie
     path = out / f"{sc.name}.gsd"

@@ -1,4 +1,4 @@
-"""Issue 12 ("a tool a biophysicist can trust"): the edges of the input space, the install, the commands the README
+"""A tool a biophysicist can trust: the edges of the input space, the install, the commands the README
 shows, --resume and --preview, broken invariants and the progress line.
 
 - Inputs the start cannot place, or that would not fit in memory, are refused in one line before placing starts;
@@ -61,6 +61,7 @@ def _one_try_at_a_time(scene):
     """The random start as it was first written: one try per loop, 7 x 7 sub-segments per pair (the reference the
     batched placement must reproduce exactly)."""
     import math
+
     from taichimyxo import rng
     from taichimyxo.geometry import closest_points, min_image
     from taichimyxo.init import straight_cell
@@ -257,6 +258,7 @@ def test_benchmarks_default_to_a_results_folder_in_the_current_directory(tmp_pat
     benchmarks-results/ in the current directory unless --out names a folder, and the stability sweep writes the
     limits it measured there too, never into the package's stability_limits.json."""
     import inspect
+
     from taichimyxo.cli import _build_parser
     with pytest.raises(SystemExit):
         _build_parser().parse_args(["bench", "stability"])

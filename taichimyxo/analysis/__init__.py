@@ -25,7 +25,8 @@ Public API
 Parts (each module's docstring holds its definitions, criteria and thresholds; all defaults in ``DEFAULTS``, every
 one can be overridden by keyword): ``params`` (DEFAULTS, the paper's numbers), ``cells`` (per-frame cell geometry:
 centres, headings, tangents, speeds), ``clusters`` (contacts, clusters of touching cells), ``aggregates`` (rotating
-aggregates in one frame), ``aggregate_measure`` (what is measured on each), ``tracking`` (aggregates across frames by shared cells: births,
+aggregates in one frame), ``aggregate_measure`` (what is measured on each), ``tracking`` (aggregates across frames by
+shared cells: births,
 merges, splits, dispersals, lifetimes; the size-independence regression), ``claims`` (the paper's claims table;
 ``claim_runs``: the runs it reads, ``claim_plots``: its figures),
 ``summary`` (a whole trajectory, the JSON), ``report`` (the text), ``plots`` (the PNGs), ``synthetic``

@@ -10,7 +10,6 @@ from .cells import CellGeometry
 from .params import R_BINS
 from .stats import ols, rigid_rotation_fit
 
-
 # rigid when the speed grows with the radius at least as r^0.5: nearer rigid rotation (r^1) than one speed (r^0)
 RIGID_EXPONENT = 0.5
 # the exponent needs particles over at least this ratio of radii (a single ring of cells has none)

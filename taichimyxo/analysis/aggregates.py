@@ -61,14 +61,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse import csgraph
+from scipy.sparse import coo_matrix, csgraph
 from scipy.spatial import cKDTree
 
 from ..geometry import min_image
+from .aggregate_measure import measure_aggregate
 from .cells import CellGeometry
 from .clusters import cell_clusters
-from .aggregate_measure import measure_aggregate
 from .params import fill_cell_defaults, parameters
 
 N_SECTORS = 16
@@ -233,7 +232,8 @@ def _circulation(geo, c, sense, cells):
 
 def _merge(geo, C, S, R, lab, P):
     """Step 4's merge: two groups of one sense whose extents overlap are one aggregate when each of them circulates
-    about their union's least-squares centre (circulation >= ``merge_circulation``), e.g. sectors or rings of one aggregate
+    about their union's least-squares centre (circulation >= ``merge_circulation``), e.g. sectors or rings of one
+    aggregate
     seeded twice; two aggregates of one sense side by side are not (near their contact the cells of each move
     across the joint circle). Closest pairs first. Returns (C, S, lab) with the merged groups relabelled."""
     C, lab = C.copy(), lab.copy()

@@ -58,8 +58,17 @@ import numpy as np
 
 from .aggregate_measure import RIGID_EXPONENT
 from .claim_plots import write_claim_plots
-from .claim_runs import (KINDS, MIN_RIGID_CELLS, free_speed, load_runs, mean_se, needs, plus_minus, runs_of,
-                         stable_tracks)
+from .claim_runs import (
+    KINDS,
+    MIN_RIGID_CELLS,
+    free_speed,
+    load_runs,
+    mean_se,
+    needs,
+    plus_minus,
+    runs_of,
+    stable_tracks,
+)
 from .stats import series_mean_se
 from .stiffness import records_from_runs, stiffness_rows
 from .summary import json_clean
@@ -133,7 +142,8 @@ def evaluate(runs: list[dict]) -> list[dict]:
         sd = float(f[q].std(ddof=1)) if len(f[q]) > 1 else float("nan")
         vals[r["label"]] = dict(kind=r["kind"], mean=float(f[q].mean()), sd=sd, final=float(f[-1]),
                                 from_min=float(t[q][0]), to_min=float(t[-1]))
-        parts.append(f"{label(r)} {r['label']}: {plus_minus(float(f[q].mean()), sd)} (t = {t[q][0]:.0f}-{t[-1]:.0f} min)")
+        parts.append(f"{label(r)} {r['label']}: {plus_minus(float(f[q].mean()), sd)} "
+                     f"(t = {t[q][0]:.0f}-{t[-1]:.0f} min)")
     hi = [vals[r["label"]]["mean"] for r in runs_of(runs, "active", "adhesion")]
     lo = [vals[r["label"]]["mean"] for r in runs_of(runs, "passive", "non-guided")]
     status = (needs(*([] if hi else ["active"]) + ([] if lo else ["passive"])) if not (hi and lo) else
@@ -188,8 +198,8 @@ def evaluate(runs: list[dict]) -> list[dict]:
         elif not n:
             measured, status = "no aggregate seen in >= 3 frames", "no aggregates in these runs"
         else:
-            measured = (f"{plus_minus(m, se)} v_b ({plus_minus(m * rs[0]['v_b'], se * rs[0]['v_b'], '.1f')} µm/min), SE over {n} "
-                        f"tracks; free cells {fs:.2f} v_b")
+            measured = (f"{plus_minus(m, se)} v_b ({plus_minus(m * rs[0]['v_b'], se * rs[0]['v_b'], '.1f')} µm/min), "
+                        f"SE over {n} tracks; free cells {fs:.2f} v_b")
             s2 = 2 * np.nan_to_num(se)
             if kind == "active":
                 good = m - s2 > fs and m <= 4 + s2
@@ -216,7 +226,8 @@ def evaluate(runs: list[dict]) -> list[dict]:
         if len(tr) < 3:
             parts.append(f"{KINDS[kind][0]}: {len(tr)} track(s), too few for a slope")
             continue
-        parts.append(f"{KINDS[kind][0]}: slope {plus_minus(reg['slope_um_per_min_per_um'], reg['stderr'], '.3f')} µm/min "
+        parts.append(f"{KINDS[kind][0]}: slope "
+                     f"{plus_minus(reg['slope_um_per_min_per_um'], reg['stderr'], '.3f')} µm/min "
                      f"per µm (t = {reg['t']:.1f}) over {len(tr)} tracks, R = {reg['radius_range_um'][0]:.1f}-"
                      f"{reg['radius_range_um'][1]:.1f} µm")
         stats.append(reg["consistent_with_zero"])
@@ -341,7 +352,8 @@ def claims(paths, out_dir: str | None = None, every: int = 1, v_b: float | None 
         files = write_claim_plots(runs, rows, os.path.join(out_dir, "claims"))
     for r in rows:                  # outputs name their inputs and plots relative to out_dir, never machine paths
         r["plot_file"] = os.path.relpath(r["plot_file"], out_dir) if r.get("plot_file") else None
-    run_info = [dict(label=r["label"], path=os.path.relpath(r["path"], out_dir), kind=r["kind"], v_b_um_per_min=r["v_b"],
+    run_info = [dict(label=r["label"], path=os.path.relpath(r["path"], out_dir), kind=r["kind"],
+                     v_b_um_per_min=r["v_b"],
                      n_cells=r["summary"]["meta"]["n_cells"], time_range_min=r["summary"]["meta"]["time_range_min"],
                      n_frames_analyzed=r["summary"]["meta"]["n_frames_analyzed"], every=every) for r in runs]
     doc = dict(claims=rows, runs=run_info, min_rigid_cells=MIN_RIGID_CELLS,

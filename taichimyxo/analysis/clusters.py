@@ -13,8 +13,7 @@ the numpy union-find it replaced."""
 from __future__ import annotations
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse import csgraph
+from scipy.sparse import coo_matrix, csgraph
 
 from ..geometry import min_image
 from .params import DEFAULTS

@@ -17,8 +17,7 @@ from ..event_table import events_path, read_events
 from .cells import CellGeometry
 from .cluster_sizes import SIZE_DEFAULTS, size_distribution
 from .clusters import cell_clusters
-from .correlations import (CORR_DEFAULTS, average_correlations, frame_correlations, msd, uniform_prefix,
-                           unwrap_tracks)
+from .correlations import CORR_DEFAULTS, average_correlations, frame_correlations, msd, uniform_prefix, unwrap_tracks
 from .defects import FIELD_DEFAULTS, find_defects, frame_field, track_defects
 from .events import event_stats
 from .params import DEFAULTS

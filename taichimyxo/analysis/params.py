@@ -14,7 +14,8 @@ DEFAULTS = dict(
     max_seeds=400,             # seeds per frame and sense at most
     centre_tol=1.0,            # a cell's own centre must lie within this x its distance from the aggregate centre
     refine_iterations=3,       # assignment / centre refinement / merge rounds
-    merge_circulation=0.75,    # two groups of one sense merge when their union circulates this well (see min_circulation)
+    merge_circulation=0.75,    # two groups of one sense merge when their union circulates this well
+                               # (see min_circulation)
     ring_um=None,              # ring width of the speed-vs-radius profile; None: 2 W
     core_radius_um=None,       # core: cells closer to the centre join without the tangential test; None: L / 2
     cos_tangent=0.8,           # velocity within acos(0.8) = 36.9° of the tangent counts as circulating

@@ -75,7 +75,8 @@ def series_mean_se(x):
     split the series into k = n // b batches of b = floor(sqrt(n)) consecutive values; SE = SD of the batch means /
     sqrt(k), consistent when the correlation time is short against b. Measured on AR(1) series of 400 values
     (tests/test_analysis.py): white noise gives 1.0x the naive SE, rho = 0.5 1.6x (exact 1.7), rho = 0.9 3.3x
-    (exact 4.4: batches of 20 frames still understate a correlation time of ~20 frames). Below 8 values there are too few batches: NaN."""
+    (exact 4.4: batches of 20 frames still understate a correlation time of ~20 frames). Below 8 values there are too
+    few batches: NaN."""
     x = np.asarray([v for v in x if v is not None], float)
     x = x[np.isfinite(x)]
     n = len(x)

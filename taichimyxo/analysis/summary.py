@@ -22,8 +22,8 @@ from typing import Iterable
 import numpy as np
 
 from ..frame import Frame
-from .aggregates import find_aggregates
 from .aggregate_measure import RIGID_EXPONENT
+from .aggregates import find_aggregates
 from .cells import CellGeometry
 from .clusters import cell_clusters
 from .measure_plots import write_measure_plots
@@ -187,7 +187,7 @@ def analyze_frames(frames: Iterable[Frame], v_b: float = 4.0, measures=None, **p
 def _summarise(P, v_b, t0, ts, per_frame, size_dist, sbins, hist_edges, h_in, h_out, s_io, sprof, eprof, have_strain,
                meta, last_agg_frame):
     n_fr = len(per_frame)
-    L = np.array(meta["box_um"])
+    np.array(meta["box_um"])
     min_tf = min(P["min_track_frames"], n_fr)
     tracks, events = link_tracks(per_frame, ts["time_min"], P["max_gap_frames"], P["link_overlap"],
                                  P["link_min_shared"])
@@ -233,8 +233,8 @@ def _summarise(P, v_b, t0, ts, per_frame, size_dist, sbins, hist_edges, h_in, h_
     rr = predictions["rigid_rotation"]
     em = predictions["edge_speed_vb_mean"]
     predictions["verdict"] = dict(
-        criteria="aggregates: stable tracks (>= min_track_frames); rigid: half or more of the measurable aggregate-frames "
-                 "have a rigidity exponent >= 0.5 (the median >= 0.5); "
+        criteria="aggregates: stable tracks (>= min_track_frames); rigid: half or more of the measurable "
+                 "aggregate-frames have a rigidity exponent >= 0.5 (the median >= 0.5); "
                  "edge faster than v_b: mean edge speed / v_b over tracks > 1.15; size-independent: |t| of the edge "
                  "speed vs radius slope < 2 (needs >= 3 tracks)",
         n_stable_aggregates=len(stable),

@@ -46,6 +46,7 @@ def panel_image(frame, color: str):
 def _colorbar(fig, rect, color: str):
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import ListedColormap, LogNorm, Normalize
+
     from ..render import make_scale
     sc = make_scale(color)
     norm = LogNorm(sc.vmin, sc.vmax) if sc.log else Normalize(sc.vmin, sc.vmax)
@@ -97,6 +98,7 @@ def compose_figure(runs, out: Path) -> list[Path]:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
     from ..render import format_time
     fig_spec = runs.figure
     panels = fig_spec.panels

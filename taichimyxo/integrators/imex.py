@@ -1,8 +1,9 @@
-"""The stiff-capable step (scene run.integrator = "imex"): linearly implicit Euler on springs, bending and contacts.
+"""The stiff-capable step (scene run.integrator = "imex"): linearly implicit Euler on springs, bending and
+contacts.
 
-Equation (docs/model.md "Equation of motion", overdamped): Z(x) v = F(x), Z the anisotropic drag. The explicit step takes
-v = Z^-1 F(x_n) and is stable only while dt stays below ~2 zeta / (stiffest rate): a few ms at the paper's k_s, k_c
-and very rigid k_a. This step takes one Newton step of backward Euler instead:
+Equation (docs/model.md "Equation of motion", overdamped): Z(x) v = F(x), Z the anisotropic drag. The explicit step
+takes v = Z^-1 F(x_n) and is stable only while dt stays below ~2 zeta / (stiffest rate): a few ms at the paper's k_s,
+k_c and very rigid k_a. This step takes one Newton step of backward Euler instead:
 
     (Z_n + dt K_n) v = F(x_n),        x_n+1 = x_n + dt v,
 
@@ -79,7 +80,7 @@ class Imex:
         self.N, self.n2 = scene.N, 2 * scene.N
         self.zeta_t, self.zeta_n = scene.zeta_t, scene.zeta_n
         C, P = state.n_cells, state.n_p
-        self.nblk = state.loops.cell_blocks(C)   # partial sums per block of cells (launch.py: CPU <= 64, GPU one a cell)
+        self.nblk = state.loops.cell_blocks(C)  # partial sums per block of cells (launch.py: CPU <= 64, GPU one a cell)
         self.bs = (C + self.nblk - 1) // self.nblk
         self.band = BandedCells(C, scene.N, state.fdt, fb)
 

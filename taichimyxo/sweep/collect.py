@@ -127,6 +127,7 @@ def plot_against(table: list[dict], key: str, others: list[str], path: Path) -> 
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
     from .spec import value_text
     values = list(dict.fromkeys(r[key] for r in table))
     xpos, log = _positions(values)

@@ -16,9 +16,9 @@ A SIGTERM without the warning (scancel, a time limit reached without it) stops t
 written, with no requeue: the next sweep of the same file resumes it.
 
 What the run prints goes to the run folder's run.log (as with the local executor); the job's own log (submitit's,
-srun's) to the sweep's slurm/ folder. Each attempt is a line in the run folder's slurm-attempts.jsonl: when it started, the job id and Slurm's restart
-count (SLURM_RESTART_COUNT), host and process id, and when it ended: its status, simulated seconds and sessions (a resumed run has more
-than one) and whether the time-limit signal stopped it."""
+srun's) to the sweep's slurm/ folder. Each attempt is a line in the run folder's slurm-attempts.jsonl: when it started,
+the job id and Slurm's restart count (SLURM_RESTART_COUNT), host and process id, and when it ended: its status,
+simulated seconds and sessions (a resumed run has more than one) and whether the time-limit signal stopped it."""
 from __future__ import annotations
 
 import json
