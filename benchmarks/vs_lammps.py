@@ -87,7 +87,7 @@ def run_taichimyxo(name: str, steps: int, warm: int) -> dict:
     """Particle-steps per second of a scene at paper scale, or of a benchmark state (benchmarks/states.py), through
     the public API (the scene's own step and precision), after `warm` steps (compilation and the first list
     builds)."""
-    from states import STATES, load
+    from states import DENSE_WARM_STEPS, STATES, load
     from taichimyxo import backend
     from taichimyxo.scene import Scene
     from taichimyxo.simulation import Simulation
@@ -97,6 +97,7 @@ def run_taichimyxo(name: str, steps: int, warm: int) -> dict:
     sc = Scene.load(scene, {"output": {"movie": False}})
     backend.restart()
     sim = Simulation(sc) if start is None else Simulation(sc, positions=start[0], engine_direction=start[1])
+    warm = max(warm, DENSE_WARM_STEPS) if name == "S13 dense" else warm
     row = {"scene": name, **time_steps(sim, steps, warm), "precision": sc.precision, "dt_ms": sc.dt * 1e3}
     sim.close()
     return row

@@ -11,9 +11,9 @@ the Simulation is built, so every choice is made at compile time and a kernel ho
 
   cpu  exactly the choices measured on a 2-core CPU (docs/performance.md): Taichi's CPU backend spends ~75 µs
        launching a parallel loop, so below SERIAL_BELOW_SEGMENTS segments every loop over items runs serially
-       (faster for small systems), above it in parallel; the neighbour grid's prefix sum runs in one thread; the implicit
-       step sums per-block partials of at most 64 blocks. Nothing else is configured: the compiled CPU kernels are
-       those of before this module (the same offline-cache keys, bit-identical runs).
+       (faster for small systems), above it in parallel; the neighbour grid's prefix sum runs in one thread; the
+       implicit step sums per-block partials of at most 64 blocks. Nothing else is configured: the compiled CPU
+       kernels are those of before this module (the same offline-cache keys, bit-identical runs).
   gpu  no loop over items is serialized, blocks of GPU_BLOCK_DIM threads (Taichi's default, not yet tuned on a GPU);
        the grid's prefix sum is a two-level blocked scan (blocks of ~sqrt(bins) bins: block totals in parallel, their
        scan in one thread, each block's own scan in parallel); the implicit step keeps one partial per cell and sums

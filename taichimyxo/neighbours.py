@@ -72,6 +72,10 @@ class NeighbourList:
         self.bin_start = st.scalar(fb, nb + 1, ti.i32)
         self.bin_cursor = st.scalar(fb, nb, ti.i32)
         self.bin_items = st.scalar(fb, S, ti.i32)
+        # beside each binned segment, in bin order: its midpoint and half length (force precision), so a candidate
+        # beyond reach is rejected from one contiguous load before its distance is computed
+        self.bin_geo = ti.Vector.field(3, dtype=st.fdt)
+        fb.dense(ti.i, S).place(self.bin_geo)
         self.seg_bin = st.scalar(fb, S, ti.i32)
         if st.loops.gpu:                                    # the blocked scan's block totals (launch.py)
             self.scan_block = scan_block(nb)
@@ -87,9 +91,9 @@ class NeighbourList:
         """Distance between segments s and t (closest points, minimum image; t's second end chained from its first,
         in force precision) for a pair the grid offers, or, when their midpoints are farther apart than the grid's
         radius (l_max + the widest cutoff), the lower bound |m_s - m_t| - l_max without the closest-points test
-        (either way >= a cutoff exactly when the distance is). The 3 x 3 bins hold about three times the candidates
-        a disc of that radius does: most are rejected here for a few operations (S3 at paper scale after 3 simulated
-        minutes, 34 rebuilds per 1000 steps: a rebuild 12.3 -> 8.6 ms, median of 5, the lists identical)."""
+        (either way >= a cutoff exactly when the distance is). The build calls it only for candidates that pass the
+        reach test on the binned midpoints (`_reach_geometry`), which rejects most of the 3 x 3 bins' candidates
+        from one contiguous load (benchmarks/results/dense_step.md)."""
         st = self.state
         a, b = st.seg_ends(s)
         c_, d_ = st.seg_ends(t)
@@ -105,6 +109,15 @@ class NeighbourList:
             _, _, c1, c2 = closest_points(pb * 0.0, pb, pc, pd)
             d = (c2 - c1).norm()
         return d
+
+    @ti.func
+    def _reach_geometry(self, s):
+        """Segment s's midpoint (wrapped) and half length, in force precision: (m_x, m_y, h)."""
+        st = self.state
+        a, b = st.seg_ends(s)
+        m = ti.cast(st.seg_mid(s), st.fdt)
+        h = 0.5 * ti.cast(st.mi(st.x[b] - st.x[a]), st.fdt).norm()
+        return ti.Vector([m[0], m[1], h])
 
     @ti.func
     def _sort_row(self, f: ti.template(), r, n):
@@ -156,6 +169,7 @@ class NeighbourList:
         for s in range(st.n_s):
             k = ti.atomic_add(self.bin_cursor[self.seg_bin[s]], 1)
             self.bin_items[k] = s
+            self.bin_geo[k] = self._reach_geometry(s)
         ti.loop_config(**st.loops.items)
         for s in range(st.n_s):
             cs = s // (N - 1)
@@ -167,6 +181,13 @@ class NeighbourList:
             by0 = b0 % nby
             n = 0
             ng = 0
+            g_s = self._reach_geometry(s)
+            # t can be within the cutoff only if its midpoint is within both half lengths plus the cutoff of s's
+            # (triangle inequality); the margin is far above rounding, so the lists are those of the exact test alone
+            reach_s = g_s[2] + cut_c + 1e-3
+            if ti.static(self.guiding):
+                if s_end:
+                    reach_s = g_s[2] + ti.max(cut_c, cut_g) + 1e-3
             # the 3 x 3 bins around (fewer on a grid narrower than 3), as a dynamic loop: unrolled, the nine inlined
             # copies of the distance test made this kernel's compile (~7 s) longer than all of a test's run
             rx = ti.static(3 if nbx >= 3 else nbx)
@@ -180,6 +201,11 @@ class NeighbourList:
                     by = (by0 + by - 1 + nby) % nby
                 bb = bx * nby + by
                 for q in range(self.bin_start[bb], self.bin_start[bb + 1]):
+                    g_t = self.bin_geo[q]
+                    dm = st.mi(ti.Vector([g_t[0] - g_s[0], g_t[1] - g_s[1]]))
+                    reach = reach_s + g_t[2]
+                    if dm.dot(dm) >= reach * reach:
+                        continue
                     t = self.bin_items[q]
                     ct = t // (N - 1)
                     kt = t % (N - 1)

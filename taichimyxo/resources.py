@@ -55,7 +55,7 @@ def field_sizes(scene, contacts: str = "coupled") -> dict:
     out = {"x": (P, P * 2 * pb), "x_ref": (P, P * 2 * pb), "x_snap": (P, P * 2 * pb), "ke": (C, C * 4),
            "nbr": (S * cap, S * cap * 4), "rev": (S * cap, S * cap * 4), "nbr_n": (S, S * 4),
            "bin_count": (bins, bins * 4), "bin_start": (bins + 1, (bins + 1) * 4), "bin_cursor": (bins, bins * 4),
-           "bin_items": (S, S * 4), "seg_bin": (S, S * 4), "flags": (4, 16)}
+           "bin_items": (S, S * 4), "bin_geo": (S, S * 3 * fb), "seg_bin": (S, S * 4), "flags": (4, 16)}
     if "guiding_capacity" in caps:
         g = 2 * C * caps["guiding_capacity"]
         out["guide"] = (g, g * 4)
@@ -71,9 +71,12 @@ def field_sizes(scene, contacts: str = "coupled") -> dict:
         out["g_tail"] = (C, C * 2 * fb)
     if scene.suppression:
         out["interacting"] = (C, C * 2 * 4)
+    if scene.guiding != "none" or scene.suppression:
+        out["leader"] = (C, C * 4)                                  # who each head follows (the event log)
     if scene.reversals:
-        for k in ("rev_clock", "rev_period", "rev_count"):
+        for k in ("rev_clock", "rev_period", "rev_count", "rev_suppressed"):
             out[k] = (C, C * 4)
+        out["clock_held"] = (1, 4)
     if scene.slime:
         g = max(1, int(round(Lx / scene.slime_grid))) * max(1, int(round(Ly / scene.slime_grid)))
         out["slime"] = (g, g * 2 * 4)

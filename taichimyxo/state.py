@@ -13,9 +13,9 @@ import numpy as np
 import taichi as ti
 
 from .frame import unwrap_chains
+from .geometry import SEGMENT_LENGTH_TOL  # noqa: F401,E402  (re-exported; defined where taichi is not imported)
 from .geometry import min_image as np_min_image
 from .launch import LoopShape, shape_for
-from .geometry import SEGMENT_LENGTH_TOL  # noqa: F401,E402  (re-exported; defined where taichi is not imported)
 
 
 @ti.func

@@ -164,7 +164,7 @@ def test_overlap_counts_as_interaction_for_suppression(gap):
 
 
 def _list_equals_all_pairs(sc_kw, steps, every=1, turn_deg=0.0):
-    """Run sim (the default skin) and, at every `every`-th step, compare its forces bit for bit with those of a
+    """Run sim (the default skin) and, at every `every`-th step, compare its forces (equal to rounding) with those of a
     second simulation whose lists hold every pair in the box (skin wider than the box) at the same positions.
     turn_deg: each cell of the start turned about its centre by a random angle up to that. Returns (sim, worst
     per-step displacement, µm)."""
@@ -195,8 +195,10 @@ def _list_equals_all_pairs(sc_kw, steps, every=1, turn_deg=0.0):
         ref.state.x.from_numpy(sim.state.x.to_numpy())
         ref.state.ke.from_numpy(sim.state.ke.to_numpy())
         fs, fr = sim.forces(), ref.forces()
-        np.testing.assert_array_equal(fs["contact"], fr["contact"])
-        np.testing.assert_array_equal(fs["total"], fr["total"])
+        # equal to rounding (1e-10 pN: a contact 1e-14 µm deep): the two lists' kernels are compiled for different
+        # capacities, and a CPU with FMA may fuse a multiply-add in one and not the other; a missed contact is pN
+        np.testing.assert_allclose(fs["contact"], fr["contact"], rtol=1e-12, atol=1e-10)
+        np.testing.assert_allclose(fs["total"], fr["total"], rtol=1e-12, atol=1e-10)
     ref.close()
     return sim, worst
 
@@ -205,7 +207,7 @@ def _list_equals_all_pairs(sc_kw, steps, every=1, turn_deg=0.0):
 def test_neighbour_list_never_misses_what_all_pairs_see():
     """Very flexible, actively following cells, crowded, heads swinging: at every step the forces from the lists
     (contacts by true distance within W + skin, guiding partners per cell end) equal those from lists holding every
-    pair in the box, bit for bit in f64. The lists are rebuilt from real displacements, not from an assumed top
+    pair in the box, equal to rounding in f64. The lists are rebuilt from real displacements, not from an assumed top
     speed."""
     sc_kw = dict(box=(15.0, 15.0), cells=14, cell={"k_a_N_m": 1e-18}, guiding={"kind": "active"},
                  run={**F64, "dt_ms": 2.0})
@@ -219,8 +221,8 @@ def test_neighbour_list_never_misses_what_all_pairs_see():
 def test_contact_list_never_misses_a_contact_in_a_dense_run():
     """Area fraction 0.83: the aligned start (S11's) with every cell turned by up to 4 deg, random polarity, so cells
     crash into their neighbours and push past each other: over 3 s the
-    contact list by true segment distance gives the same forces as the all-pairs list at every fifth step, bit for
-    bit in f64, through several rebuilds."""
+    contact list by true segment distance gives the same forces as the all-pairs list at every fifth step, equal to
+    rounding in f64, through several rebuilds."""
     sc_kw = dict(box=(12.0, 12.0), cells=48, population={"start": "aligned"}, run={**F64, "dt_ms": 2.0})
     sim, worst = _list_equals_all_pairs(sc_kw, 1500, every=5, turn_deg=4.0)
     f = sim.forces()["contact"]
