@@ -14,8 +14,8 @@
   other triggers (:class:`taichimyxo.triggers.WallClock`: checkpoints) whether they fire;
 - stops cleanly on SIGINT/SIGTERM (``catch_signals``: the chunk finishes, status "interrupted");
 - rolls back on a broken invariant or a neighbour-list overflow (``rollback``, docs/model.md "Numerics"): the
-  state is copied in memory before every chunk, and a chunk that breaks one is redone from that copy with each
-  scene step split into 2 (then 4, 8) shorter steps; the scene's step resumes after it. Writers see no frame of
+  state is copied on the device before every chunk (never to the host), and a chunk that breaks one is redone
+  from that copy with each scene step split into 2 (then 4, 8) shorter steps; the scene's step resumes after it. Writers see no frame of
   the broken attempt. When the shortest split breaks too, or with ``rollback=False``, the run stops (status
   "failed", ``Run.broken`` says why, ``Run.gave_up`` after rollbacks, the state back at the last good copy);
 - closes every writer (any status), then calls each writer's ``finish`` (what depends on how the run ended: the
@@ -171,7 +171,7 @@ def drive(sim, n_steps: int, writers=(), *, chunk_steps: int = 2000, speed_windo
     def advance_chunk(n, F):
         """n steps, the frame at F if they reach it, the writers' after_chunk; rolled back and redone at split
         steps when they break an invariant."""
-        snapshot = sim.get_checkpoint() if rollback else None
+        snapshot = sim.take_snapshot() if rollback else None
         split, redone = 1, []
         while True:
             try:
@@ -185,7 +185,7 @@ def drive(sim, n_steps: int, writers=(), *, chunk_steps: int = 2000, speed_windo
             except (InvariantBroken, NeighbourOverflow) as e:
                 if snapshot is None:
                     raise
-                sim.load_checkpoint(snapshot)
+                sim.restore_snapshot(snapshot)
                 sim.rollbacks.extend(redone)            # the copy predates this chunk's rollbacks
                 run._frame = None
                 run.steps_done = sim.step_count - run.start_step

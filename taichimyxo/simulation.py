@@ -45,6 +45,7 @@ class Simulation:
         self.time_offset = 0.0      # simulated time of steps taken at another dt than the scene's, minus their share
         self.writers = []
         self.rollbacks = []         # (step, simulated s, split) of each rollback (driver.py), kept in checkpoints
+        self._twins, self._twin_tree = None, None       # the rollback's copy of the state, made on first use
         self._closed = False
         backend.simulation_starting()
         fb = ti.FieldsBuilder()
@@ -113,6 +114,30 @@ class Simulation:
               "rollbacks": np.array(self.rollbacks, dtype=np.float64).reshape(-1, 3)}
         st.update({name: f.to_numpy() for name, f in self._checkpointed().items()})
         return st
+
+    def _state_fields(self) -> dict:
+        return {"x": self.state.x, "x_snap": self.state.x_snap, "ke": self.state.ke, **self._checkpointed()}
+
+    def take_snapshot(self) -> dict:
+        """Copy the state into twin fields on the device (a rollback's copy, driver.py): nothing is copied to the
+        host. Returns the scalars the copy needs; restore_snapshot puts both back."""
+        fields = self._state_fields()
+        if self._twins is None:
+            fb = ti.FieldsBuilder()
+            self._twins = {name: _twin(f, fb) for name, f in fields.items()}
+            self._twin_tree = fb.finalize()
+        for name, f in fields.items():
+            self._twins[name].copy_from(f)
+        return {"step": self.step_count, "snap_step": self.state.snap_step, "time_offset": self.time_offset,
+                "rollbacks": list(self.rollbacks)}
+
+    def restore_snapshot(self, snap: dict) -> None:
+        for name, f in self._state_fields().items():
+            f.copy_from(self._twins[name])
+        self.step_count, self.state.snap_step = snap["step"], snap["snap_step"]
+        self.time_offset, self.rollbacks = snap["time_offset"], list(snap["rollbacks"])
+        self.integrator.reset(restored=True)
+        self.neighbours.rebuild()
 
     def load_checkpoint(self, st: dict) -> None:
         self.state.x.from_numpy(st["x"])
@@ -243,9 +268,22 @@ class Simulation:
         if self._tree is not None:
             self._tree.destroy()
             self._tree = None
+        if self._twin_tree is not None:
+            self._twin_tree.destroy()
+            self._twins, self._twin_tree = None, None
         if not self._closed:
             self._closed = True
             backend.simulation_closed()
+
+
+def _twin(f, fb):
+    """A field of f's type and shape, placed by fb."""
+    if isinstance(f, ti.MatrixField):
+        t = ti.Vector.field(f.n, f.dtype) if f.ndim == 1 else ti.Matrix.field(f.n, f.m, f.dtype)
+    else:
+        t = ti.field(f.dtype)
+    fb.dense(ti.axes(*range(len(f.shape))), f.shape).place(t)
+    return t
 
 
 def make_simulation(scene, **kw) -> Simulation:

@@ -134,7 +134,9 @@ def test_dense_feasible_start_shows_placement_progress(tmp_path):
     assert "taichimyxo: placed 126 of 126 cells" in p.stderr
     assert "\r" not in p.stderr
     progress = [ln for ln in p.stderr.splitlines() if ln.startswith("S1: ")]
-    assert progress and all(" simulated (" in ln and " steps/s, " in ln and ln.endswith(" left") for ln in progress)
+    # a run this short ends within its first chunk, which compiles the kernels: no rate is measured, so no ETA
+    assert progress and all(" simulated (" in ln and (ln.endswith(" left") or " ..." in ln) for ln in progress)
+    assert not any(ln.endswith(" left") for ln in progress)
     assert progress[-1].startswith("S1: 0.7 s of 0.7 s simulated (100 %)")
 
 
