@@ -16,8 +16,9 @@
 - rolls back on a broken invariant or a neighbour-list overflow (``rollback``, docs/model.md "Numerics"): the
   state is copied on the device before every chunk (never to the host), and a chunk that breaks one is redone
   from that copy with each scene step split into 2 (then 4, 8) shorter steps; the scene's step resumes after it.
-  Writers see no frame of the broken attempt. When the shortest split breaks too, or with ``rollback=False``, the run stops (status
-  "failed", ``Run.broken`` says why, ``Run.gave_up`` after rollbacks, the state back at the last good copy);
+  Writers see no frame of the broken attempt. When the shortest split breaks too, or with ``rollback=False``, the
+  run stops (status "failed", ``Run.broken`` says why, ``Run.gave_up`` after rollbacks, the state back at the last
+  good copy);
 - closes every writer (any status), then calls each writer's ``finish`` (what depends on how the run ended: the
   checkpoint, the last-frame panel, the summary).
 """
