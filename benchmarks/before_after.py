@@ -1,0 +1,98 @@
+"""Before and after a change, side by side in one run: the cost of S3's state after one simulated hour at paper
+scale (benchmarks/states.py) under an earlier commit and under the working tree, alternating, so a machine that
+drifts weighs on both alike.
+
+    python benchmarks/before_after.py --before COMMIT [--rounds 2] [--steps 1500] [--threads 2] [--out DIR]
+
+The earlier commit is checked out into a temporary git worktree; each measurement is its own process (one
+Simulation per process) through the public API only (Scene.load, Simulation(scene, positions=, engine_direction=),
+run), so any commit with that API can be measured. Each side runs at its own S3 default step, and the working tree
+also at `--also-dt-ms` (default 2): the change of code and the change of step are told apart. Writes
+before_after.csv (every round) and prints ms per step and wall seconds per simulated second.
+"""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+from benchlib import HERE, parser, write_csv
+
+REPO = HERE.parent
+WORKER = r"""
+import json, sys, time
+import numpy as np
+from taichimyxo import backend
+backend.init("cpu", int(sys.argv[3]))
+import taichi as ti
+from taichimyxo.scene import Scene
+from taichimyxo.simulation import Simulation
+dt, steps = float(sys.argv[1]), int(sys.argv[2])
+z = np.load(sys.argv[4])
+over = {"output": {"movie": False}}
+if dt:
+    over["run"] = {"dt_ms": dt}
+sc = Scene.load("S3", over)
+sim = Simulation(sc, positions=z["positions"], engine_direction=z["engine_direction"])
+sim.run(200)
+ti.sync()
+r0 = sim.rebuilds
+t = time.perf_counter()
+sim.run(steps)
+ti.sync()
+w = time.perf_counter() - t
+print(json.dumps({"dt_ms": sc.dt * 1e3, "ms_per_step": round(1e3 * w / steps, 3),
+                  "wall_s_per_simulated_s": round(w / (steps * sc.dt), 3),
+                  "rebuilds_per_1000_steps": round(1e3 * (sim.rebuilds - r0) / steps, 1)}))
+"""
+
+
+def measure(tree: Path, dt_ms: float, steps: int, threads: int) -> dict:
+    env = dict(os.environ, PYTHONPATH=str(tree))
+    p = subprocess.run([sys.executable, "-c", WORKER, str(dt_ms), str(steps), str(threads),
+                        str(HERE / "states" / "S3-1h.npz")], capture_output=True, text=True, cwd=tree, env=env,
+                       timeout=1800)
+    for line in reversed(p.stdout.splitlines()):
+        if line.startswith("{"):
+            return json.loads(line)
+    raise SystemExit(f"before_after: the worker in {tree} failed: {(p.stderr or p.stdout).strip()[-300:]}")
+
+
+def main() -> None:
+    p = parser(__doc__)
+    p.add_argument("--before", required=True, help="the earlier commit")
+    p.add_argument("--rounds", type=int, default=2)
+    p.add_argument("--steps", type=int, default=1500)
+    p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--also-dt-ms", type=float, default=2.0, help="the working tree also at this step (0: skip)")
+    a = p.parse_args()
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        old = Path(tmp) / "before"
+        subprocess.run(["git", "-C", str(REPO), "worktree", "add", "-f", "--detach", str(old), a.before],
+                       check=True, capture_output=True)
+        try:
+            sides = [("before", old, 0.0), ("after", REPO, 0.0)]
+            if a.also_dt_ms:
+                sides.append((f"after at {a.also_dt_ms:g} ms", REPO, a.also_dt_ms))
+            for rnd in range(a.rounds):
+                for label, tree, dt in sides:
+                    r = {"side": label, "round": rnd, **measure(tree, dt, a.steps, a.threads)}
+                    rows.append(r)
+                    print(f"round {rnd} {label:>16}: {r['dt_ms']:g} ms step, {r['ms_per_step']:.3f} ms/step, "
+                          f"{r['wall_s_per_simulated_s']:.3f} wall s per simulated s, "
+                          f"{r['rebuilds_per_1000_steps']:g} rebuilds per 1000 steps", flush=True)
+        finally:
+            subprocess.run(["git", "-C", str(REPO), "worktree", "remove", "--force", str(old)], capture_output=True)
+    print(f"load average (1, 5, 15 min): {[round(x, 2) for x in os.getloadavg()]}")
+    out = Path(a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    write_csv(out / "before_after.csv", rows)
+    print(f"wrote {out / 'before_after.csv'}")
+
+
+if __name__ == "__main__":
+    main()
