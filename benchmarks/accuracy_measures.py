@@ -82,7 +82,7 @@ def measure_strain(method: Method, quick: bool, k_c: float = 0.002) -> dict:
     polarities), each cell tilted by up to 3 degrees, relaxing and jamming. Total strain energy (J) every second;
     compared by its mean over the second half of the run. At k_c = 0.002 N/m (the paper's high-density value) and
     0.01 N/m (low density: the stiffness inside S3's aggregates)."""
-    from taichimyxo.init import initial_configuration
+    from taichimyxo.placement import initial_configuration
     T = 6.0 if quick else 20.0
     sc = scene_for({"domain": {"width_um": 15.0, "height_um": 15.0},
                     "population": {"start": "aligned", "density_cells_per_cm2": 4e7},

@@ -5,9 +5,9 @@ drifts weighs on both alike.
     python benchmarks/before_after.py --before COMMIT [--rounds 2] [--steps 1500] [--threads 2] [--out DIR]
 
 The earlier commit is checked out into a temporary git worktree; each measurement is its own process (one
-Simulation per process) through the public API only (Scene.load, Simulation(scene, positions=, engine_direction=),
-run), so any commit with that API can be measured. Each side runs at its own S3 default step, and the working tree
-also at `--also-dt-ms` (default 2): the change of code and the change of step are told apart. Writes
+Simulation per process) through the public API only (Scene.load, Simulation.from_positions, advance, or an earlier
+commit's equivalents), so any commit with that API can be measured. Each side runs at its own S3 default step, and
+the working tree also at `--also-dt-ms` (default 2): the change of code and the change of step are told apart. Writes
 before_after.csv (every round) and prints ms per step and wall seconds per simulated second.
 """
 from __future__ import annotations
@@ -36,12 +36,16 @@ over = {"output": {"movie": False}}
 if dt:
     over["run"] = {"dt_ms": dt}
 sc = Scene.load("S3", over)
-sim = Simulation(sc, positions=z["positions"], engine_direction=z["engine_direction"])
-sim.run(200)
+if hasattr(Simulation, "from_positions"):
+    sim = Simulation.from_positions(sc, z["positions"], z["engine_direction"])
+else:                                   # commits before Simulation.from_positions
+    sim = Simulation(sc, positions=z["positions"], engine_direction=z["engine_direction"])
+advance = sim.advance if hasattr(sim, "advance") else sim.run
+advance(200)
 ti.sync()
 r0 = sim.rebuilds
 t = time.perf_counter()
-sim.run(steps)
+advance(steps)
 ti.sync()
 w = time.perf_counter() - t
 print(json.dumps({"dt_ms": sc.dt * 1e3, "ms_per_step": round(1e3 * w / steps, 3),

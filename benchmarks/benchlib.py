@@ -2,8 +2,8 @@
 
 Every benchmark is a script run from a clone, `python benchmarks/<name>.py [--quick] [--out DIR]`, writing into
 benchmarks-results/ in the current directory unless --out names a folder (`--out benchmarks/results` updates the
-committed results). They use only taichimyxo's public API (taichimyxo.scene, taichimyxo.simulation, taichimyxo.init,
-taichimyxo.invariants, taichimyxo.backend).
+committed results). They use only taichimyxo's public API (taichimyxo.scene, taichimyxo.simulation,
+taichimyxo.placement, taichimyxo.invariants, taichimyxo.backend).
 """
 from __future__ import annotations
 
@@ -82,11 +82,11 @@ def scene_for(data: dict, method: Method):
 
 def make(scene, method: Method, positions=None, ke=None):
     """The scene's simulation; imex with the method's contact treatment and CG tolerance."""
-    from taichimyxo.simulation import make_simulation
+    from taichimyxo.simulation import Simulation
     if method.integrator == "imex":
-        return make_simulation(scene, positions=positions, engine_direction=ke, contacts=method.contacts,
+        return Simulation.from_positions(scene, positions, ke, contacts=method.contacts,
                                tol=method.tol)
-    return make_simulation(scene, positions=positions, engine_direction=ke)
+    return Simulation.from_positions(scene, positions, ke)
 
 
 def time_steps(sim, steps: int, warm: int) -> dict:
@@ -105,7 +105,7 @@ def run(sim, n: int, dt_ms: float | None = None) -> None:
     is an instability."""
     from taichimyxo.simulation import NeighbourOverflow
     try:
-        sim.run(n, None if dt_ms is None else dt_ms * 1e-3)
+        sim.advance(n, None if dt_ms is None else dt_ms * 1e-3)
     except NeighbourOverflow as e:
         raise Unstable(str(e)) from None
     if not np.all(np.isfinite(sim.wrapped_positions())):
@@ -113,7 +113,7 @@ def run(sim, n: int, dt_ms: float | None = None) -> None:
 
 
 def straight(centre, angle, N=8):
-    from taichimyxo.init import straight_cell
+    from taichimyxo.placement import straight_cell
     return straight_cell(np.asarray(centre, float), angle, N, L0)
 
 

@@ -72,7 +72,7 @@ def make_sim(state: str, skin: float | None, dt_ms: float | None):
     sc = scaled_scene(scene, area, run)
     if start is None:
         return Simulation(sc)
-    return Simulation(sc, positions=start[0], engine_direction=start[1])
+    return Simulation.from_positions(sc, start[0], start[1])
 
 
 def profile(a) -> dict:
@@ -95,7 +95,7 @@ def profile(a) -> dict:
             pass
 
     x0 = sim.state.x.to_numpy()
-    sim.run(2)                        # compiles (or loads) the step and the build
+    sim.advance(2)                        # compiles (or loads) the step and the build
     pairs_only()
     empty()
     ti.sync()
@@ -181,7 +181,7 @@ def rebuilds(a) -> dict:
     backend.init("cpu", a.threads)
     sim = make_sim(a.state, a.skin, a.dt_ms)
     r0 = sim.rebuilds
-    sim.run(a.steps)
+    sim.advance(a.steps)
     out = {"state": a.state, "skin_um": sim.scene.skin, "dt_ms": sim.layout.dt * 1e3, "steps": a.steps,
            "rebuilds_per_1000_steps": round(1e3 * (sim.rebuilds - r0) / a.steps, 2)}
     sim.close()
@@ -191,7 +191,7 @@ def rebuilds(a) -> dict:
 def check_state(name: str):
     """(scene name, area multiple, positions, engine directions) of a forces-check state, the same whatever the code
     under test (states reached by stepping are stored the first time and reused)."""
-    from taichimyxo.init import initial_configuration
+    from taichimyxo.placement import initial_configuration
     from taichimyxo.scene import Scene
     if name in ("S13 start", "S11 start"):
         sc = Scene.load(name.split()[0])
@@ -207,7 +207,7 @@ def check_state(name: str):
         from taichimyxo.bench import scaled_scene
         from taichimyxo.simulation import Simulation
         sim = Simulation(scaled_scene(scene, area))
-        sim.run(steps)
+        sim.advance(steps)
         np.savez(store, positions=sim.positions(), engine_direction=sim.engine_direction())
         sim.close()
     z = np.load(store)
@@ -223,7 +223,7 @@ def forces(a) -> None:
     out = {}
     for name in (a.states.split(",") if a.states else CHECK_STATES):
         scene, area, pos, ke = check_state(name)
-        sim = Simulation(scaled_scene(scene, area), positions=pos, engine_direction=ke)
+        sim = Simulation.from_positions(scaled_scene(scene, area), pos, ke)
         for k, v in sim.forces().items():
             out[f"{name}|{k}"] = v
         nl = sim.neighbours

@@ -52,7 +52,7 @@ def main(argv=None) -> int:
     from taichimyxo import backend
     from taichimyxo.invariants import Bounds, InvariantMonitor
     from taichimyxo.scene import Scene, SceneError
-    from taichimyxo.simulation import make_simulation
+    from taichimyxo.simulation import Simulation
 
     over = {"domain": {"width_um": args.box, "height_um": args.box}, "output": {"movie": False},
             "run": {"hours": args.minutes / 60.0, "seed": args.seed}}
@@ -65,7 +65,7 @@ def main(argv=None) -> int:
         return 2
     backend.init("cpu", args.threads)
     t_setup = time.perf_counter()
-    sim = make_simulation(sc)
+    sim = Simulation(sc)
     bounds = Bounds.for_scene(sc)
     mon = InvariantMonitor(sim, bounds)
     window = mon.default_window()
@@ -101,7 +101,7 @@ def main(argv=None) -> int:
     row(mon.records[0])
     while sim.step_count < total:
         nxt = min(total, sim.step_count + every)
-        sim.run(max(0, nxt - window - sim.step_count))
+        sim.advance(max(0, nxt - window - sim.step_count))
         r = mon.sample(nxt - sim.step_count)
         row(r)
         if not r["finite"]:

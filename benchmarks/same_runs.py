@@ -29,7 +29,7 @@ CASES = {
     "active+strain": ("S3", {}, {}),
     "adhesion": ("S3", {"guiding": {"kind": "adhesion"}}, {}),
     "reversals+suppression": ("S15", {}, {}),
-    "reversing, no guiding": ("S15", {"guiding": {"kind": "none"}, "reversals": {"suppression": False}}, {}),
+    "reversing without guiding": ("S15", {"guiding": {"kind": "none"}, "reversals": {"suppression": False}}, {}),
     "slime+strain": ("S16", {}, {}),
     "slime+reversals": ("S17", {"reversals": {"enabled": True}}, {}),
     "dense": ("S13", {}, {}),
@@ -46,12 +46,13 @@ WORKER = r"""
 import hashlib, json, sys
 import numpy as np
 from taichimyxo import backend
-backend.init("cpu", int(sys.argv[3]))
 from taichimyxo.scene import Scene
 import taichimyxo.simulation as simulation
 name, over, options = sys.argv[1], json.loads(sys.argv[2]), json.loads(sys.argv[5])
 over.setdefault("output", {})["movie"] = False
 sc = Scene.load(name, over, preview=True)
+# Taichi as the API starts it for this scene (an f64 scene's literals in f64)
+backend.init("cpu", int(sys.argv[3]), default_fp="f64" if sc.precision == "f64" else None)
 sim = simulation.Simulation(sc, **options)
 steps = int(sys.argv[4])
 advance = sim.advance if hasattr(sim, "advance") else sim.run

@@ -75,21 +75,21 @@ def stability_worker(integrator: str, contacts: str, k_a: float, k_c: float, dts
     than max(5 v_b, twice the fastest windowed speed of a 10 s, 0.5 ms explicit run from the same state) over the
     last window, no segments closer than 0.3 W (taichimyxo/invariants.py)."""
     from taichimyxo import backend
-    from taichimyxo.init import initial_configuration
     from taichimyxo.invariants import Bounds, measure
+    from taichimyxo.placement import initial_configuration
     backend.init("cpu", 1, default_fp="f32")
     relax = Method("explicit", dt_ms=0.5, precision="mixed")
     sc0 = _stab_scene(relax, k_a, k_c, config)
     pos, ke0 = initial_configuration(sc0)       # no reversals here: the engine directions stay as they start
     prep = make(sc0, relax, pos, ke0)
-    prep.run(steps(5.0, 0.5))
+    prep.advance(steps(5.0, 0.5))
     pos0 = prep.positions()
     # the fastest windowed (1 s) particle speed of the physics itself (explicit, 0.5 ms, over the next 10 s): in
     # this jam, with guiding, flexible cells whip past 5 v_b, so the speed bound is twice this, and at least 5 v_b
     v_ref = 0.0
     for _ in range(10):
         prep.snapshot_speed()
-        prep.run(steps(1.0, 0.5))
+        prep.advance(steps(1.0, 0.5))
         v_ref = max(v_ref, float(prep.particle_speed().max() / sc0.v_b_um_per_min))
     prep.close()
     b = Bounds()

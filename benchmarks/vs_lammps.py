@@ -96,7 +96,7 @@ def run_taichimyxo(name: str, steps: int, warm: int) -> dict:
         scene, _, start = load(name)
     sc = Scene.load(scene, {"output": {"movie": False}})
     backend.restart()
-    sim = Simulation(sc) if start is None else Simulation(sc, positions=start[0], engine_direction=start[1])
+    sim = Simulation(sc) if start is None else Simulation.from_positions(sc, start[0], start[1])
     warm = max(warm, DENSE_WARM_STEPS) if name == "S13 dense" else warm
     row = {"scene": name, **time_steps(sim, steps, warm), "precision": sc.precision, "dt_ms": sc.dt * 1e3}
     sim.close()

@@ -20,12 +20,12 @@ _os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "false")   # keep stdout fo
 
 # name -> module that defines it (imported on first use)
 _LAZY = {
-    "load_scene": "api", "Simulation": "api", "run": "api", "render_frame": "api", "render_movie": "api",
+    "load_scene": "api", "Simulation": "simulation", "run": "api", "render_frame": "api", "render_movie": "api",
     "run_scene": "api", "analyze": "api", "claims": "api", "Periodic": "triggers", "WallClock": "triggers",
     "Frame": "frame", "Scene": "scene",
-    "SceneError": "scene", "Run": "driver", "drive": "driver", "load_sweep": "sweep", "run_sweep": "sweep",
+    "SceneError": "scene", "Run": "run_loop", "drive": "run_loop", "load_sweep": "sweep", "run_sweep": "sweep",
 }
-_SUBMODULES = ("writers", "triggers", "driver", "api", "render", "trajectory")
+_SUBMODULES = ("writers", "triggers", "run_loop", "api", "render", "trajectory")
 
 __all__ = sorted(_LAZY) + list(_SUBMODULES)
 

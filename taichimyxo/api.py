@@ -9,10 +9,11 @@
     image = tm.render_frame(frame, color="speed")                # an RGB image, (h, w, 3) uint8
 
 - :func:`load_scene`: a scene by name (as ``list`` shows it) or path, with keys overridden by their dotted names.
-- :func:`Simulation`: the simulation of the scene's integrator, cells placed by the scene's start (or taken from
-  a checkpoint), Taichi initialised for the scene's precision.
-- :func:`run`: advance by simulated time (or steps) with writers attached (taichimyxo.writers, triggers in
-  taichimyxo.triggers); returns the :class:`taichimyxo.driver.Run` (status, steps, wall time).
+- :class:`Simulation` (taichimyxo.simulation.Simulation): the simulation of the scene's integrator, cells placed
+  by the scene's start, Taichi started for the scene's precision; ``Simulation.from_checkpoint`` and
+  ``Simulation.from_positions`` start elsewhere. ``sim.advance(steps)`` advances with no writer.
+- :func:`run`: ``sim.run(...)``: run for simulated time (or steps) with writers attached (taichimyxo.writers,
+  triggers in taichimyxo.triggers); returns the :class:`taichimyxo.run_loop.Run` (status, steps, wall time).
 - :func:`render_frame`: one Frame to an image; :func:`render_movie`: a trajectory to a movie and a panel.
 - :func:`analyze`: what ``python -m taichimyxo analyze`` does (taichimyxo.analysis).
 - :func:`claims`: what ``python -m taichimyxo claims`` does: the paper's claims measured on runs, as one table.
@@ -23,7 +24,6 @@ from __future__ import annotations
 import os
 
 from .scene import SCHEMA, Scene, SceneError
-from .start import build_simulation, init_backend, initial_state  # noqa: F401  (the steps of Simulation)
 
 
 class RenderOptionError(ValueError):
@@ -56,32 +56,13 @@ def load_scene(name_or_path, set: dict | None = None, *, seed: int | None = None
     return scene
 
 
-def Simulation(scene: Scene, *, arch: str = "cpu", threads: int | None = None, checkpoint=None, positions=None,
-               engine_direction=None):
-    """The simulation of `scene` with its integrator (taichimyxo.simulation.make_simulation), cells placed by the
-    scene's start, or at `positions` (n_cells, N, 2) µm with `engine_direction` (n_cells,) ±1, or at the state of
-    `checkpoint` (a path written by writers.Checkpoint, or its dict; refused when written for another scene).
-    Initialises Taichi (arch, threads: default all cores, or TAICHIMYXO_THREADS) unless it already is so."""
-    if checkpoint is not None and not isinstance(checkpoint, dict):
-        from .writers import read_checkpoint
-        checkpoint = read_checkpoint(checkpoint, scene)
-    positions, engine_direction = initial_state(scene, checkpoint, positions, engine_direction)
-    init_backend(scene, arch, threads)
-    return build_simulation(scene, positions, engine_direction, checkpoint)
-
-
 def run(sim, *, seconds=None, minutes=None, hours=None, steps=None, writers=(), progress: bool = False, **options):
-    """Advance `sim` by simulated time (seconds, minutes or hours, on the scene's step grid) or by `steps`, with
-    `writers` attached (taichimyxo.writers). progress: show the progress line. options: taichimyxo.driver.drive's
-    (catch_signals, close, chunk_steps, speed_window_s). Returns the Run (status "completed", or "interrupted"
-    after Ctrl-C, or "failed" with Run.broken naming a broken invariant)."""
-    from .driver import drive, steps_for
-    n = steps_for(sim, seconds, minutes, hours, steps)
-    attached = list(writers)
-    if progress:
-        from .writers import ProgressLine
-        attached.insert(0, ProgressLine(sim.scene.name, sim.step_count + n))
-    return drive(sim, n, attached, **options)
+    """sim.run(...): run `sim` for simulated time (seconds, minutes or hours, on the scene's step grid) or `steps`,
+    with `writers` attached (taichimyxo.writers), closed at the end. progress: show the progress line. options:
+    taichimyxo.run_loop.drive's (catch_signals, chunk_steps, speed_window_s, rollback). Returns the Run (status
+    "completed", or "interrupted" after Ctrl-C, or "failed" with Run.broken naming a broken invariant)."""
+    return sim.run(seconds=seconds, minutes=minutes, hours=hours, steps=steps, writers=writers, progress=progress,
+                   **options)
 
 
 def render_frame(frame, color: str = "speed", size=(1920, 1080), **options):

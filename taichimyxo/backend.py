@@ -51,6 +51,15 @@ def init(arch: str = "cpu", threads: int | None = None, fallback: bool = True, q
     return used
 
 
+def ensure(arch: str | None = None, threads: int | None = None, default_fp: str | None = None) -> str:
+    """Taichi on `arch` with `threads` and the float literals `default_fp`; what is None stays as Taichi already
+    runs (when it does not: the CPU, all cores or TAICHIMYXO_THREADS). Returns the arch used."""
+    if _state["arch"] is not None:
+        arch = arch or _state["arch"]
+        threads = threads or _state["threads"]
+    return init(arch or "cpu", threads, default_fp=default_fp)
+
+
 def reset() -> None:
     ti.reset()
     _state.update(arch=None, threads=None, fp=None)

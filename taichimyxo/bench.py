@@ -54,11 +54,11 @@ def time_steps(sim, steps: int, warm: int) -> dict:
     """Wall time of `steps` steps after `warm` steps (compilation and the first list builds excluded): ms per step,
     particle-steps per second and the neighbour-list rebuilds they included."""
     import taichi as ti
-    sim.run(warm)
+    sim.advance(warm)
     ti.sync()
     r0 = sim.rebuilds
     t0 = time.perf_counter()
-    sim.run(steps)
+    sim.advance(steps)
     ti.sync()
     wall = time.perf_counter() - t0
     return {"particles": sim.n_p, "steps": steps, "wall_s": round(wall, 3), "ms_per_step": round(1e3 * wall / steps, 4),
@@ -73,9 +73,9 @@ def measure(name: str, area: float, steps: int, warm: int, run: dict | None = No
     from .simulation import Simulation
     sc = scaled_scene(name, area, run)
     t0 = time.perf_counter()
-    sim = Simulation(sc) if start is None else Simulation(sc, positions=start[0], engine_direction=start[1])
+    sim = Simulation(sc) if start is None else Simulation.from_positions(sc, start[0], start[1])
     try:
-        sim.run(warm)                                 # compiles the step, settles the list
+        sim.advance(warm)                                 # compiles the step, settles the list
         import taichi as ti
         ti.sync()
         setup = time.perf_counter() - t0              # placement, fields, compiling, warm steps

@@ -217,7 +217,7 @@ def cmd_scene(args) -> int:
         print(to_toml(sc), end="")
         return 0
     from .api import run_scene
-    from .progress import duration
+    from .status_line import duration
     summary = run_scene(sc, out_dir=args.out, arch=args.arch, resume=args.resume, progress=not args.quiet,
                         threads=args.threads, rollback=not args.no_rollback, overwrite=args.overwrite)
     if summary.get("already_complete"):
@@ -240,7 +240,7 @@ def cmd_scene(args) -> int:
 
 def _print_summary(summary: dict, out: str) -> None:
     if "particle_steps_per_second" in summary:
-        from .progress import duration
+        from .status_line import duration
         # this session's steps with this session's wall time (after --resume, the totals follow, labelled)
         steps = summary.get("steps_this_session", summary["steps"])
         line = (f"{summary['scene']}: {summary['cells']} cells, {steps} steps "

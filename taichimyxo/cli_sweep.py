@@ -22,7 +22,7 @@ def positive_int(text: str) -> int:
     return v
 
 
-EXECUTOR_NAMES = ("local", "slurm")           # taichimyxo.sweep.driver.EXECUTORS (not imported: keep the CLI light)
+EXECUTOR_NAMES = ("local", "slurm")   # taichimyxo.sweep.orchestrator.EXECUTORS (not imported: keep the CLI light)
 
 
 # --executor slurm's options on the command line: (flag, [slurm] key, type, metavar, help);
@@ -56,7 +56,7 @@ def executor_options(args) -> dict:
 
 
 def cmd_sweep(args) -> int:
-    from .progress import duration
+    from .status_line import duration
     from .sweep import run_sweep
     res = run_sweep(args.file, executor=args.executor, jobs=args.jobs, out=args.out, dry_run=args.dry_run,
                     options=executor_options(args), resume=args.resume, overwrite=args.overwrite)

@@ -44,11 +44,11 @@ class EventLog(Writer):
     @staticmethod
     def has_events(sim) -> bool:
         m = sim.model
-        return m.reversals is not None or getattr(m.guiding, "leader", None) is not None
+        return m.reversals is not None or getattr(m.head_to_tail, "leader", None) is not None
 
     def _read(self, sim):
         m = sim.model
-        rev, gd = m.reversals, m.guiding
+        rev, gd = m.reversals, m.head_to_tail
         return dict(step=int(sim.step_count), time=float(sim.time),
                     count=_np(getattr(rev, "rev_count", None)), supp=_np(getattr(rev, "rev_suppressed", None)),
                     clock=_np(getattr(rev, "rev_clock", None)), leader=_leader(gd))

@@ -157,7 +157,7 @@ class InvariantMonitor:
             c0 = centres(sim.positions())
             t0 = sim.time
             sim.snapshot_speed()
-            sim.run(window_steps)
+            sim.advance(window_steps)
             sp = sim.particle_speed()
             pos = sim.positions()
             if np.all(np.isfinite(sp)) and np.all(np.isfinite(pos)):
@@ -250,7 +250,7 @@ def check_invariants(sim, steps: int, window_steps: int | None = None, bounds: B
     to Bounds.for_scene). Returns the monitor (records, summary)."""
     mon = InvariantMonitor(sim, bounds)
     if settle_steps:
-        sim.run(settle_steps)
+        sim.advance(settle_steps)
     mon.sample(measure_only=True)
     if not mon.records[0]["finite"]:
         raise AssertionError(f"non-finite positions after {settle_steps} settling steps")

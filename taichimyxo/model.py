@@ -1,22 +1,25 @@
 """The force field: the model's terms (taichimyxo/terms/, one file per docs/model.md term) composed at compile time.
 
-A scene's effects decide which units exist (`Model.units`); the kernels iterate over them with `ti.static`, so an
-effect a scene does not use is neither compiled nor allocated. The integrators (taichimyxo/integrators/) call, in
-one fused kernel per step:
-    pairs()             parallel loop over segments: each contact pair evaluated once by its lower segment; head
-                        and tail segments gather guiding from their own short list
-    cell_forces(c)      per cell, in its own frame: internal terms (springs, bending), engine, then the per-cell
-                        terms (contacts gathered, guiding, slime)
-    after_move(c, m, dt) per cell after its particles moved: neighbour-list flag, slime claim or reversal clock
-    deposit(c, dt)      per cell, a last loop when slime is on: the slime write, then the reversal clock
+A scene's effects decide which units exist (`Model.units`); each unit implements hooks of the term protocol
+(taichimyxo/terms/base.py), and the model keeps, at compile time, one list per hook of the units that implement it.
+The kernels iterate those lists with `ti.static`, so an effect a scene does not use is neither compiled nor
+allocated. The integrators (taichimyxo/integrators/) call, in one fused kernel per step:
+    pairs()             parallel loop over segments: every unit's pair_pass (contacts, head-to-tail)
+    cell_forces(c)      per cell, in its own frame: internal forces (add_forces), the engine, then the per-cell
+                        forces (add_cell_forces)
+    after_move(c, m, dt) per cell after its particles moved: the neighbour-list flag, then every unit's after_move
+    last_loop(c, dt)    per cell, a last loop when a unit needs one (has_last_loop): every unit's last_loop, then the
+                        after_move of units that follow it
+and the linearly implicit step iterates `stiff_terms` (add_stiffness) and `coupling_terms` (add_coupling).
 
-Adding a force law: write its unit in taichimyxo/terms/ (parameters from the scene, fields, `add_cell_forces` or
-`pair_pass`, numpy energy, stiffness if stiff) and list it in `Model.__init__`.
+Adding a force law: write its unit in taichimyxo/terms/ (a Term: parameters from the scene, fields, its hooks, numpy
+energy, stiffness if stiff) and add one line to `Model.__init__`.
 """
 
 import numpy as np
 import taichi as ti
 
+from .terms.base import Term
 from .terms.bending import Bending
 from .terms.contacts import Contacts
 from .terms.engine import Engine
@@ -29,28 +32,36 @@ from .terms.strain import Strain
 
 @ti.data_oriented
 class Model:
-    def __init__(self, scene, state, neighbours, fb, record_contacts: bool = False):
+    def __init__(self, scene, state, neighbours, builder, record_contacts: bool = False):
         self.state, self.nl = state, neighbours
         self.N = scene.N
+        # one line per unit, in the order the kernels apply them (the order of every sum: runs depend on it)
         self.springs = Springs(scene)
         self.bending = Bending(scene)
-        self.engine = Engine(scene, state)
-        self.contacts = Contacts(scene, state, neighbours, fb, record=record_contacts)
+        self.engine = Engine(scene, state)          # not a hook: its tangents are every cell's frame
+        self.contacts = Contacts(scene, state, neighbours, builder, record=record_contacts)
         head_tail = scene.guiding != "none" or scene.suppression
-        self.guiding = HeadToTail(scene, state, neighbours, fb) if head_tail else None
-        self.slime = Slime(scene, state, fb) if scene.slime else None
-        self.reversals = Reversals(scene, state, fb, self.guiding) if scene.reversals else None
-        self.strain = Strain(self.contacts, fb) if scene.strain else None
-        self.has_guiding = self.guiding is not None       # compile-time flags (`is` cannot appear in a kernel)
-        self.has_slime = self.slime is not None
-        self.has_reversals = self.reversals is not None
+        self.head_to_tail = HeadToTail(scene, state, neighbours, builder) if head_tail else None
+        self.slime = Slime(scene, state, builder) if scene.slime else None
+        self.reversals = Reversals(scene, state, builder, self.head_to_tail) if scene.reversals else None
+        self.strain = Strain(self.contacts, builder) if scene.strain else None
+        self.units: list[Term] = [u for u in (self.springs, self.bending, self.engine, self.contacts, self.head_to_tail,
+                                              self.slime, self.reversals, self.strain) if u is not None]
         # compile-time lists: what the kernels iterate over
-        self.internal = [self.springs, self.bending]
-        self.pair_terms = [u for u in (self.contacts, self.guiding) if u is not None]
-        pulls = self.guiding is not None and scene.guiding != "none"
-        self.cell_terms = [u for u in (self.contacts, self.guiding if pulls else None, self.slime) if u is not None]
-        self.units = [u for u in (self.springs, self.bending, self.engine, self.contacts, self.guiding, self.slime,
-                                  self.reversals, self.strain) if u is not None]
+        self.internal = self.implementing("add_forces")
+        self.pair_terms = self.implementing("pair_pass")
+        self.cell_terms = self.implementing("add_cell_forces")
+        self.stiff_terms = self.implementing("add_stiffness")
+        self.coupling_terms = self.implementing("add_coupling")
+        self.last_loop_terms = self.implementing("last_loop")
+        self.has_last_loop = bool(self.last_loop_terms)
+        moving = self.implementing("after_move")
+        self.late_terms = [u for u in moving if u.after_last_loop and self.has_last_loop]
+        self.move_terms = [u for u in moving if u not in self.late_terms]
+
+    def implementing(self, hook: str) -> list:
+        """The units that implement `hook` (terms/base.py), in the order of `units`."""
+        return [u for u in self.units if hook in u.hooks()]
 
     # ------------------------------------------------------------------ in kernels
     @ti.func
@@ -100,19 +111,19 @@ class Model:
 
     @ti.func
     def after_move(self, c, moved, dt):
-        """After cell c's update: neighbour-list flag, then the slime claim (the reversal follows the slime write,
-        in deposit) or the reversal clock."""
+        """After cell c's update: the neighbour-list flag, then each unit's after_move (a slime claim, a reversal
+        clock unless it follows the last loop)."""
         self.nl.flag_moved(moved)
-        if ti.static(self.has_slime):
-            self.slime.claim(c)
-        elif ti.static(self.has_reversals):
-            self.reversals.advance(c, dt)
+        for u in ti.static(self.move_terms):
+            u.after_move(c, dt)
 
     @ti.func
-    def deposit(self, c, dt):
-        self.slime.write(c)
-        if ti.static(self.has_reversals):
-            self.reversals.advance(c, dt)
+    def last_loop(self, c, dt):
+        """Cell c in the last loop over cells (has_last_loop): the slime write, then a reversal clock."""
+        for u in ti.static(self.last_loop_terms):
+            u.last_loop(c, dt)
+        for u in ti.static(self.late_terms):
+            u.after_move(c, dt)
 
     # ------------------------------------------------------------------ measurements
     @ti.kernel
@@ -134,10 +145,10 @@ class Model:
         made on first use and kept (a measurement, not part of a run's memory)."""
         st = self.state
         if getattr(self, "_out", None) is None:
-            fb = ti.FieldsBuilder()
+            builder = ti.FieldsBuilder()
             fields = [ti.Vector.field(2, dtype=ti.f64) for _ in range(3)]
-            fb.dense(ti.i, st.n_p).place(*fields)
-            self._out = (*fields, fb.finalize())
+            builder.dense(ti.i, st.n_p).place(*fields)
+            self._out = (*fields, builder.finalize())
         f_int, f_tot, tan, _ = self._out
         self._evaluate(f_int, f_tot, tan)
         sh = (st.n_cells, st.N, 2)
@@ -145,22 +156,33 @@ class Model:
                 "contact": self.contacts.per_particle(), "tangent": tan.to_numpy().reshape(sh)}
 
     def close(self) -> None:
-        self.contacts.close()
+        for u in self.units:
+            u.close()
         if getattr(self, "_out", None) is not None:
             self._out[3].destroy()
             self._out = None
 
     # ------------------------------------------------------------------ state of the units
-    CHECKPOINTED = {"reversals": ("rev_clock", "rev_period", "rev_count", "rev_suppressed"), "slime": ("slime",)}
+    def start(self) -> None:
+        """The initial state is loaded: each unit starts (reversal periods and phases)."""
+        for u in self.units:
+            u.start()
+
+    def hold_clocks(self, held: bool) -> None:
+        """Hold every step-counting clock during the parts of one split scene step (a rollback's redo)."""
+        for u in self.units:
+            u.hold_clock(held)
 
     def checkpoint_fields(self) -> dict:
         """Name -> field of every unit's state that a checkpoint must carry."""
         out = {}
-        for unit, names in self.CHECKPOINTED.items():
-            u = getattr(self, unit)
-            if u is not None:
-                out.update({n: getattr(u, n) for n in names})
+        for u in self.units:
+            out.update(u.checkpoint_fields())
         return out
+
+    def added_later(self) -> set:
+        """Checkpoint fields older checkpoints may lack (left at 0 when loading them)."""
+        return {n for u in self.units for n in u.ADDED_LATER}
 
 
 def fields_of(obj) -> dict:

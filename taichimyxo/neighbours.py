@@ -30,6 +30,12 @@ from .state import SEGMENT_LENGTH_TOL, State, closest_points
 # the 3 x 3 bins searched, so the build stops the run with the invariant's message
 LENGTH_BOUND = 1.0 + SEGMENT_LENGTH_TOL
 
+# NeighbourList.flags, set in kernels and read on the host
+FLAG_CONTACT_OVERFLOW = 0     # more listed segments than a row holds
+FLAG_MOVED = 1                # a particle moved past half the skin: rebuild before the next force evaluation
+FLAG_GUIDE_OVERFLOW = 2       # more cell ends than a guiding row holds
+FLAG_LONG_SEGMENT = 3         # a segment longer than LENGTH_BOUND l0 at a build
+
 
 class NeighbourOverflow(RuntimeError):
     pass
@@ -43,13 +49,13 @@ def grid_radius(l0: float, cutoff: float) -> float:
 
 @ti.data_oriented
 class NeighbourList:
-    def __init__(self, state: State, fb: ti.FieldsBuilder, W: float, skin: float, capacity: int,
+    def __init__(self, state: State, builder: ti.FieldsBuilder, W: float, skin: float, capacity: int,
                  guiding_range: float | None = None, guiding_capacity: int = 0):
         self.state = st = state
         self.W, self.skin, self.max_nbrs = W, skin, capacity
         self.contact_cutoff = W + skin
-        self.guiding = guiding_range is not None
-        self.guiding_cutoff = W + guiding_range + skin if self.guiding else 0.0
+        self.guide_lists = guiding_range is not None
+        self.guiding_cutoff = W + guiding_range + skin if self.guide_lists else 0.0
         self.max_guides = guiding_capacity
         self.l_max = LENGTH_BOUND * st.layout.l0
         self.radius = grid_radius(st.layout.l0, max(self.contact_cutoff, self.guiding_cutoff))
@@ -57,33 +63,31 @@ class NeighbourList:
         self.nby = max(1, int(st.Ly // self.radius))
         nb = self.nbx * self.nby
         S = st.n_s
-        self.x_ref = st.vec(fb, st.n_p, st.pdt)            # positions at the last build
+        self.x_ref = st.vec(builder, st.n_p, st.pdt)            # positions at the last build
         self.nbr = ti.field(ti.i32)                         # contact partners, sorted
         self.rev = ti.field(ti.i32)                         # for a partner t < s: the slot of s in t's row
-        fb.dense(ti.ij, (S, capacity)).place(self.nbr, self.rev)
-        self.nbr_n = st.scalar(fb, S, ti.i32)
-        if self.guiding:
+        builder.dense(ti.ij, (S, capacity)).place(self.nbr, self.rev)
+        self.nbr_n = st.scalar(builder, S, ti.i32)
+        if self.guide_lists:
             self.guide = ti.field(ti.i32)                   # per cell end: other cells' end segments, sorted
-            fb.dense(ti.ij, (2 * st.n_cells, guiding_capacity)).place(self.guide)
-            self.guide_n = st.scalar(fb, 2 * st.n_cells, ti.i32)
+            builder.dense(ti.ij, (2 * st.n_cells, guiding_capacity)).place(self.guide)
+            self.guide_n = st.scalar(builder, 2 * st.n_cells, ti.i32)
         else:
             self.guide = self.guide_n = None
-        self.bin_count = st.scalar(fb, nb, ti.i32)
-        self.bin_start = st.scalar(fb, nb + 1, ti.i32)
-        self.bin_cursor = st.scalar(fb, nb, ti.i32)
-        self.bin_items = st.scalar(fb, S, ti.i32)
+        self.bin_count = st.scalar(builder, nb, ti.i32)
+        self.bin_start = st.scalar(builder, nb + 1, ti.i32)
+        self.bin_cursor = st.scalar(builder, nb, ti.i32)
+        self.bin_items = st.scalar(builder, S, ti.i32)
         # beside each binned segment, in bin order: its midpoint and half length (force precision), so a candidate
         # beyond reach is rejected from one contiguous load before its distance is computed
         self.bin_geo = ti.Vector.field(3, dtype=st.fdt)
-        fb.dense(ti.i, S).place(self.bin_geo)
-        self.seg_bin = st.scalar(fb, S, ti.i32)
+        builder.dense(ti.i, S).place(self.bin_geo)
+        self.seg_bin = st.scalar(builder, S, ti.i32)
         if st.loops.gpu:                                    # the blocked scan's block totals (launch.py)
             self.scan_block = scan_block(nb)
             self.n_scan_blocks = (nb + self.scan_block - 1) // self.scan_block
-            self.bin_block = st.scalar(fb, self.n_scan_blocks, ti.i32)
-        # 0: contact list overflow, 1: a particle moved past half the skin, 2: guiding list overflow,
-        # 3: a segment longer than l_max
-        self.flags = st.scalar(fb, 4, ti.i32)
+            self.bin_block = st.scalar(builder, self.n_scan_blocks, ti.i32)
+        self.flags = st.scalar(builder, 4, ti.i32)       # indexed by the FLAG_ names above
         self.rebuilds = 0
 
     @ti.func
@@ -147,7 +151,7 @@ class NeighbourList:
             a, b = st.seg_ends(s)
             e = st.mi(st.x[b] - st.x[a])
             if e.dot(e) > l_max * l_max:
-                self.flags[3] = 1
+                self.flags[FLAG_LONG_SEGMENT] = 1
             bx = ti.min(ti.cast(m[0] / st.Lx * nbx, ti.i32), nbx - 1)
             by = ti.min(ti.cast(m[1] / st.Ly * nby, ti.i32), nby - 1)
             bn = bx * nby + by
@@ -185,7 +189,7 @@ class NeighbourList:
             # t can be within the cutoff only if its midpoint is within both half lengths plus the cutoff of s's
             # (triangle inequality); the margin is far above rounding, so the lists are those of the exact test alone
             reach_s = g_s[2] + cut_c + 1e-3
-            if ti.static(self.guiding):
+            if ti.static(self.guide_lists):
                 if s_end:
                     reach_s = g_s[2] + ti.max(cut_c, cut_g) + 1e-3
             # the 3 x 3 bins around (fewer on a grid narrower than 3), as a dynamic loop: unrolled, the nine inlined
@@ -216,19 +220,19 @@ class NeighbourList:
                             if n < self.max_nbrs:
                                 self.nbr[s, n] = t
                             else:
-                                self.flags[0] = 1
+                                self.flags[FLAG_CONTACT_OVERFLOW] = 1
                             n += 1
-                        if ti.static(self.guiding):
+                        if ti.static(self.guide_lists):
                             if s_end and (kt == 0 or kt == N - 2) and d < cut_g:
                                 if ng < self.max_guides:
                                     self.guide[row_g, ng] = t
                                 else:
-                                    self.flags[2] = 1
+                                    self.flags[FLAG_GUIDE_OVERFLOW] = 1
                                 ng += 1
             n = ti.min(n, self.max_nbrs)
             self.nbr_n[s] = n
             self._sort_row(self.nbr, s, n)
-            if ti.static(self.guiding):
+            if ti.static(self.guide_lists):
                 if s_end:
                     ng = ti.min(ng, self.max_guides)
                     self.guide_n[row_g] = ng
@@ -245,7 +249,7 @@ class NeighbourList:
         ti.loop_config(**st.loops.items)
         for p in range(st.n_p):
             self.x_ref[p] = st.x[p]
-        self.flags[1] = 0
+        self.flags[FLAG_MOVED] = 0
 
     @ti.func
     def _scan_bins(self):
@@ -277,16 +281,17 @@ class NeighbourList:
                 acc += self.bin_count[i]
 
     def rebuild(self) -> None:
-        self.flags[0] = self.flags[2] = self.flags[3] = 0
+        self.flags[FLAG_CONTACT_OVERFLOW] = self.flags[FLAG_GUIDE_OVERFLOW] = self.flags[FLAG_LONG_SEGMENT] = 0
         self._build()
         self.rebuilds += 1
-        if self.flags[0] or self.flags[2]:
-            which = ("segments within W + skin of one segment", self.max_nbrs) if self.flags[0] else \
+        if self.flags[FLAG_CONTACT_OVERFLOW] or self.flags[FLAG_GUIDE_OVERFLOW]:
+            contacts = self.flags[FLAG_CONTACT_OVERFLOW]
+            which = ("segments within W + skin of one segment", self.max_nbrs) if contacts else \
                 ("cell ends within W + d_g + skin of one cell end", self.max_guides)
             raise NeighbourOverflow(
                 f"more than {which[1]} {which[0]}: cells are packed beyond area fraction 1 or blew up; set "
                 f"run.max_neighbours higher or use a smaller time step")
-        if self.flags[3]:
+        if self.flags[FLAG_LONG_SEGMENT]:
             raise NeighbourOverflow(
                 f"segment lengths above {LENGTH_BOUND:g} l0 outside 1 +- {SEGMENT_LENGTH_TOL} l0 at a neighbour-list "
                 f"build: the chain blew up; use a smaller time step")
@@ -307,4 +312,4 @@ class NeighbourList:
     @ti.func
     def flag_moved(self, moved):
         if moved:
-            self.flags[1] = 1
+            self.flags[FLAG_MOVED] = 1

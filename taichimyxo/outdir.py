@@ -11,8 +11,8 @@ import json
 import os
 from pathlib import Path
 
-from .progress import duration
 from .schema import SceneError
+from .status_line import duration
 
 
 class OutputError(SceneError):

@@ -45,7 +45,7 @@ def field_sizes(scene, contacts: str = "coupled") -> dict:
     n, N = scene.n_cells, scene.N
     P, S, C = n * N, n * (N - 1), n
     pb = 8 if scene.precision in ("f64", "mixed") else 4         # positions
-    fb = 8 if scene.precision == "f64" else 4                     # forces
+    force_bytes = 8 if scene.precision == "f64" else 4                     # forces
     caps = list_capacities(scene)
     cap = caps["capacity"]
     cutoff = scene.width + scene.skin + caps.get("guiding_range", 0.0)
@@ -55,20 +55,20 @@ def field_sizes(scene, contacts: str = "coupled") -> dict:
     out = {"x": (P, P * 2 * pb), "x_ref": (P, P * 2 * pb), "x_snap": (P, P * 2 * pb), "ke": (C, C * 4),
            "nbr": (S * cap, S * cap * 4), "rev": (S * cap, S * cap * 4), "nbr_n": (S, S * 4),
            "bin_count": (bins, bins * 4), "bin_start": (bins + 1, (bins + 1) * 4), "bin_cursor": (bins, bins * 4),
-           "bin_items": (S, S * 4), "bin_geo": (S, S * 3 * fb), "seg_bin": (S, S * 4), "flags": (4, 16)}
+           "bin_items": (S, S * 4), "bin_geo": (S, S * 3 * force_bytes), "seg_bin": (S, S * 4), "flags": (4, 16)}
     if "guiding_capacity" in caps:
         g = 2 * C * caps["guiding_capacity"]
         out["guide"] = (g, g * 4)
         out["guide_n"] = (2 * C, 2 * C * 4)
     if scene.integrator == "imex" and contacts != "explicit":
-        out["fa"] = (S, S * 2 * fb)                                # each segment gathers and records its own
-        out["fb"] = (S, S * 2 * fb)
+        out["fa"] = (S, S * 2 * force_bytes)                                # each segment gathers and records its own
+        out["fb"] = (S, S * 2 * force_bytes)
     else:
-        out["pair_f"] = (S * cap, S * cap * 8 * fb)                # each pair once, both sides' results
+        out["pair_f"] = (S * cap, S * cap * 8 * force_bytes)                # each pair once, both sides' results
     if scene.guiding != "none":
-        out["g_head"] = (C, C * 2 * fb)
+        out["g_head"] = (C, C * 2 * force_bytes)
     if scene.guiding == "adhesion":
-        out["g_tail"] = (C, C * 2 * fb)
+        out["g_tail"] = (C, C * 2 * force_bytes)
     if scene.suppression:
         out["interacting"] = (C, C * 2 * 4)
     if scene.guiding != "none" or scene.suppression:
@@ -84,24 +84,24 @@ def field_sizes(scene, contacts: str = "coupled") -> dict:
     if scene.strain:
         out["strain_seg"] = (S, S * 8)
     if scene.mass > 0 and scene.integrator != "imex":
-        out["v"] = (P, P * 2 * fb)
+        out["v"] = (P, P * 2 * force_bytes)
     if scene.integrator == "imex":
         from .terms.contacts import Contacts
         bw = min(6, 2 * N)
-        out["Lf"] = (2 * P * (bw + 1), 2 * P * (bw + 1) * fb)
+        out["Lf"] = (2 * P * (bw + 1), 2 * P * (bw + 1) * force_bytes)
         for k in ("vel", "rhs", "tmp"):
-            out[k] = (2 * P, 2 * P * fb)
-        out["tan"] = (P, P * 2 * fb)
-        out["xrel"] = (P, P * 2 * fb)
+            out[k] = (2 * P, 2 * P * force_bytes)
+        out["tan"] = (P, P * 2 * force_bytes)
+        out["xrel"] = (P, P * 2 * force_bytes)
         if contacts != "explicit":
             m = Contacts.MAX_CONTACTS
             out["ct_n"] = (S, S * 4)
             out["ct_t"] = (S * m, S * m * 4)
-            out["ct_w"] = (S * m, S * m * 4 * fb)
+            out["ct_w"] = (S * m, S * m * 4 * force_bytes)
             out["overflow"] = (1, 4)
         if contacts == "coupled":
             for k in ("cg_r", "cg_u", "cg_w", "cg_p", "cg_s", "vprev"):
-                out[k] = (2 * P, 2 * P * fb)
+                out[k] = (2 * P, 2 * P * force_bytes)
             out["active"] = (C, C * 4)
             nblk = shape_for(S, "cpu").cell_blocks(C)        # the CPU's (a GPU's fields are on the device)
             out["part"] = (nblk * 3, nblk * 3 * 8)
@@ -118,7 +118,7 @@ def estimate(scene) -> dict:
     P = scene.n_cells * scene.N
     host = P * HOST_BYTES_PER_PARTICLE
     if scene.start == "random":
-        from .init import placement_grid_bytes
+        from .placement import placement_grid_bytes
         host += placement_grid_bytes(scene)
     lists = f["nbr"][1] + f["rev"][1] + f.get("pair_f", (0, 0))[1] + f.get("guide", (0, 0))[1] + f["bin_count"][1] * 3
     return {"fields": fields, "neighbour_list": lists,

@@ -19,7 +19,7 @@ from .catalogue import SCENES_DIR, available_scenes, resolve_path  # noqa: F401 
 from .schema import SCHEMA, STIFFNESS_NAMES, SceneError, defaults, merge, parse_set, to_toml, toml_value  # noqa: F401
 from .stability import default_dt_ms
 
-# The densest random start placed reliably and in bounded time (init.py, "Random sequential placement": above
+# The densest random start placed reliably and in bounded time (placement.py, "Random sequential placement": above
 # 0.40 the tries per cell climb from hundreds to thousands, and past 0.44 placement stalls).
 RANDOM_MAX_AREA_FRACTION = 0.40
 
@@ -122,7 +122,7 @@ class Scene:
             raise SceneError(f"{given} covers {af:.2f} of the area; the {self.start!r} start can place at most "
                              f"{limit:.2f}")
         if self.start == "spiral":
-            from .init import spiral_capacity
+            from .placement import spiral_capacity
             cap = spiral_capacity(self)
             if self.n_cells > cap:
                 raise SceneError(f"population: {self.n_cells} cells do not fit on a spiral in {Lx:g} x {Ly:g} µm "

@@ -1,6 +1,6 @@
 """Running a scene: the writers a scene asks for (taichimyxo.writers: movie, trajectory, summary, checkpoint, the
 invariant check, a progress line), built from the scene and the command line's options and driven by
-taichimyxo.driver.drive; clean interruption (SIGINT/SIGTERM close every file and write a checkpoint), --resume, and a
+taichimyxo.run_loop.drive; clean interruption (SIGINT/SIGTERM close every file and write a checkpoint), --resume, and a
 check of the
 numerical invariants at every frame (a run that breaks them stops, keeping what it wrote, and says why).
 
@@ -21,11 +21,11 @@ import sys
 import time
 from pathlib import Path
 
-from .driver import drive
 from .event_log import EventLog
 from .outdir import OutputError, check_out_folder, outputs, plan_run, read_summary, remove_run  # noqa: F401
-from .progress import duration
+from .run_loop import drive
 from .scene import Scene, SceneError
+from .status_line import duration
 from .triggers import Periodic, WallClock
 from .writers import (
     SUMMARY_VERSION,
@@ -103,7 +103,7 @@ def run_scene(scene: Scene, out_dir: str = "videos", arch: str = "cpu", resume: 
     An earlier run in out_dir (taichimyxo.outdir.plan_run): an unfinished one continues only with resume and is
     replaced only with overwrite; a finished one of the same scene is returned as it is, with "already_complete".
     stop_after_steps (tests): behave as if interrupted after that many steps.
-    rollback: a chunk that breaks an invariant is redone at split steps (taichimyxo/driver.py); a run that breaks one
+    rollback: a chunk that breaks an invariant is redone at split steps (taichimyxo/run_loop.py); a run that breaks one
     at every split, or at once without rollback, returns with status "failed" (files closed, checkpoint written)."""
     # what the run needs, before anything is placed, allocated or written
     from .resources import check_resources
@@ -136,11 +136,15 @@ def run_scene(scene: Scene, out_dir: str = "videos", arch: str = "cpu", resume: 
 
     # place the cells before Taichi starts: a density the start cannot place is bad input (one line, exit 2), and a
     # resumed run takes its state from the checkpoint instead of placing cells it would throw away
-    from .start import build_simulation, init_backend, initial_state
-    positions, engine_direction = initial_state(scene, ckpt, progress=_placement_progress(scene) if progress else None)
+    from .simulation import Simulation, init_backend, initial_state
+    if ckpt is None:
+        start = initial_state(scene, progress=_placement_progress(scene) if progress else None)
     used_arch = init_backend(scene, arch, threads)
     t_setup = time.perf_counter()
-    sim = build_simulation(scene, positions, engine_direction, ckpt)
+    if ckpt is None:
+        sim = Simulation.from_positions(scene, *start, arch=arch, threads=threads)
+    else:
+        sim = Simulation.from_checkpoint(scene, ckpt, arch=arch, threads=threads)
     setup_s = time.perf_counter() - t_setup
 
     attached = scene_writers(scene, files, resumed=ckpt is not None, progress=progress,

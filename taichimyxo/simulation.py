@@ -1,8 +1,10 @@
 """The Simulation: a scene's state, force field (its terms) and integrator, built once, and what is measured from it.
 
-    sim = Simulation(scene)             # fields for what the scene uses, initial configuration from the scene
-    sim.run(steps, dt=None)             # advance (dt in s; the scene's step by default)
-    sim.run_for(minutes=5, writers=[])  # advance simulated time with writers attached (taichimyxo/driver.py)
+    sim = Simulation(scene)             # Taichi started, fields for what the scene uses, cells placed by its start
+    sim = Simulation.from_positions(scene, positions, engine_direction)    # or at given positions
+    sim = Simulation.from_checkpoint(scene, "out/S3.ckpt.npz")             # or at a checkpoint's state
+    sim.advance(steps, dt=None)         # advance, no writers (dt in s; the scene's step by default)
+    sim.run(minutes=5, writers=[...])       # run simulated time with writers attached (taichimyxo/run_loop.py)
     sim.frame()                         # a Frame: numpy arrays, what writers and analysis see
 
 Composition (docs/model.md for every equation): State (state.py) holds the particles; NeighbourList
@@ -17,50 +19,67 @@ bit-identical runs, and a resumed run equals an uninterrupted one. How the kerne
 parallel, the scans) is the arch's loop shape, taichimyxo/launch.py.
 """
 
+from __future__ import annotations
+
 import numpy as np
 import taichi as ti
 
 from . import backend
 from .frame import Frame
-from .integrators import make_integrator, records_contacts
+from .integrators import make_integrator, needs_rebuild, records_contacts
 from .launch import shape_for
 from .model import Model, field_bytes, fields_of
 from .neighbours import NeighbourList, NeighbourOverflow  # noqa: F401  (NeighbourOverflow: API)
+from .scene import SceneError
 from .state import Layout, State, list_capacities
-
-# checkpoint fields newer than some checkpoints: an older checkpoint without them leaves them at 0
-ADDED_LATER = ("rev_suppressed",)
 
 
 class Simulation:
-    def __init__(self, scene, positions: np.ndarray | None = None, engine_direction: np.ndarray | None = None,
-                 loop_shape: str | None = None, **integrator_options):
-        """Build fields for `scene` and load the initial configuration (from the scene's start unless positions,
-        (n_cells, N, 2) µm, and engine_direction, (n_cells,) ±1, are given). loop_shape: "cpu" or "gpu" forces how the
-        kernels launch their loops (taichimyxo/launch.py; default: the arch's). integrator_options go to the
-        integrator (imex: contacts = coupled | diagonal | explicit, tol, max_iter)."""
+    def __init__(self, scene, *, arch: str | None = None, threads: int | None = None, loop_shape: str | None = None,
+                 _start: tuple | None = None, **integrator_options):
+        """The simulation of `scene` with its integrator, cells placed by the scene's start (a density the start
+        cannot place is a SceneError, raised before Taichi starts). Taichi is started for the scene's precision on
+        `arch` with `threads` (default: as it already runs, else the CPU with all cores or TAICHIMYXO_THREADS).
+        loop_shape: "cpu" or "gpu" forces how the kernels launch their loops (taichimyxo/launch.py; default: the
+        arch's). integrator_options go to the integrator (imex: contacts = coupled | diagonal | explicit, tol,
+        max_iter). Other starts: from_positions, from_checkpoint."""
+        positions, engine_direction = _start if _start is not None else initial_state(scene)
+        self.arch = init_backend(scene, arch, threads)
         self.scene = scene
         self.layout = Layout.from_scene(scene)
         self.step_count = 0
         self.time_offset = 0.0      # simulated time of steps taken at another dt than the scene's, minus their share
         self.writers = []
-        self.rollbacks = []         # (step, simulated s, split) of each rollback (driver.py), kept in checkpoints
+        self.rollbacks = []         # (step, simulated s, split) of each rollback (run_loop.py), kept in checkpoints
         self._twins, self._twin_tree = None, None       # the rollback's copy of the state, made on first use
         self._closed = False
         backend.simulation_starting()
-        fb = ti.FieldsBuilder()
-        self.state = State(self.layout, fb, shape_for(self.layout.n_segments, loop_shape))
-        self.neighbours = NeighbourList(self.state, fb, scene.width, scene.skin, **list_capacities(scene))
-        self.model = Model(scene, self.state, self.neighbours, fb,
+        builder = ti.FieldsBuilder()
+        self.state = State(self.layout, builder, shape_for(self.layout.n_segments, loop_shape))
+        self.neighbours = NeighbourList(self.state, builder, scene.width, scene.skin, **list_capacities(scene))
+        self.model = Model(scene, self.state, self.neighbours, builder,
                            record_contacts=records_contacts(scene, **integrator_options))
-        self.integrator = make_integrator(scene, self.state, self.model, self.neighbours, fb, **integrator_options)
-        self._tree = fb.finalize()
-        if positions is None:
-            from .init import initial_configuration
-            positions, engine_direction = initial_configuration(scene)
+        self.integrator = make_integrator(scene, self.state, self.model, self.neighbours, builder, **integrator_options)
+        self._tree = builder.finalize()
         self.set_state(positions, engine_direction)
-        if self.model.reversals is not None:
-            self.model.reversals.start()
+        self.model.start()
+
+    @classmethod
+    def from_positions(cls, scene, positions, engine_direction, **options) -> Simulation:
+        """The simulation of `scene` with its cells at `positions`, (n_cells, N, 2) µm, heads by `engine_direction`,
+        (n_cells,) ±1 (+1: particle 0 is the head). options: those of Simulation."""
+        return cls(scene, _start=(positions, engine_direction), **options)
+
+    @classmethod
+    def from_checkpoint(cls, scene, checkpoint, **options) -> Simulation:
+        """The simulation of `scene` at the state of `checkpoint` (a path written by writers.Checkpoint, or its
+        dict as read_checkpoint returns it; refused, ValueError, when written for another scene)."""
+        if not isinstance(checkpoint, dict):
+            from .writers import read_checkpoint
+            checkpoint = read_checkpoint(checkpoint, scene)
+        sim = cls(scene, _start=(checkpoint["x"], checkpoint["ke"]), **options)
+        sim.load_checkpoint(checkpoint)
+        return sim
 
     # ------------------------------------------------------------------ sizes
     @property
@@ -119,13 +138,13 @@ class Simulation:
         return {"x": self.state.x, "x_snap": self.state.x_snap, "ke": self.state.ke, **self._checkpointed()}
 
     def take_snapshot(self) -> dict:
-        """Copy the state into twin fields on the device (a rollback's copy, driver.py): nothing is copied to the
+        """Copy the state into twin fields on the device (a rollback's copy, run_loop.py): nothing is copied to the
         host. Returns the scalars the copy needs; restore_snapshot puts both back."""
         fields = self._state_fields()
         if self._twins is None:
-            fb = ti.FieldsBuilder()
-            self._twins = {name: _twin(f, fb) for name, f in fields.items()}
-            self._twin_tree = fb.finalize()
+            builder = ti.FieldsBuilder()
+            self._twins = {name: _twin(f, builder) for name, f in fields.items()}
+            self._twin_tree = builder.finalize()
         for name, f in fields.items():
             self._twins[name].copy_from(f)
         return {"step": self.step_count, "snap_step": self.state.snap_step, "time_offset": self.time_offset,
@@ -146,8 +165,9 @@ class Simulation:
         self.time_offset = float(st["time_offset"]) if "time_offset" in st else 0.0
         done = np.asarray(st["rollbacks"]) if "rollbacks" in st else np.zeros((0, 3))
         self.rollbacks = [(int(a), float(b), int(c)) for a, b, c in done]
+        added_later = self.model.added_later()
         for name, f in self._checkpointed().items():
-            if name in st or name not in ADDED_LATER:
+            if name in st or name not in added_later:
                 f.from_numpy(st[name])
         self.state.x_snap.from_numpy(st["x_snap"])
         self.state.snap_step = int(st["snap_step"])
@@ -155,8 +175,9 @@ class Simulation:
         self.neighbours.rebuild()
 
     # ------------------------------------------------------------------ driving
-    def run(self, n_steps: int, dt: float | None = None) -> None:
-        """Advance n_steps steps of dt seconds (the scene's step by default).
+    def advance(self, n_steps: int, dt: float | None = None) -> None:
+        """Advance n_steps steps of dt seconds (the scene's step by default), with no writer: run() is the same
+        with writers attached.
         The neighbour list stays valid because every step checks every particle's real displacement since the list
         was built, and the list is rebuilt as soon as one has moved half the skin: then, at every force evaluation,
         no two particles have closed in by more than the skin since the build, whatever their speed (a guided head
@@ -172,7 +193,7 @@ class Simulation:
                 m = control.next_step(left)
                 self.step_count += m
                 left -= m
-                if control.took(step(m * self.layout.dt), m):
+                if control.took(step(m * self.layout.dt), m):     # decodes the step code
                     self.neighbours.rebuild()
             return
         dt = self.layout.dt if dt is None else dt
@@ -180,41 +201,51 @@ class Simulation:
             self.time_offset += n_steps * (dt - self.layout.dt)
         for _ in range(n_steps):
             self.step_count += 1
-            if step(dt) & 1:
+            if needs_rebuild(step(dt)):
                 self.neighbours.rebuild()
 
-    def run_split(self, n_steps: int, split: int) -> None:
-        """Advance n_steps scene steps, each taken as `split` steps of dt / split (a rollback's redo, driver.py):
+    def advance_split(self, n_steps: int, split: int) -> None:
+        """Advance n_steps scene steps, each taken as `split` steps of dt / split (a rollback's redo, run_loop.py):
         the step count, frames and reversal clocks still count scene steps."""
         dt = self.layout.dt / split
-        reversals = self.model.reversals
         step = self.integrator.step
         for _ in range(n_steps):
             self.step_count += 1
             for k in range(split):
-                if reversals is not None:
-                    reversals.hold_clock(k < split - 1)
-                if step(dt) & 1:
+                self.model.hold_clocks(k < split - 1)
+                if needs_rebuild(step(dt)):
                     self.neighbours.rebuild()
 
     def attach(self, writer) -> None:
-        """Attach a writer (taichimyxo.writers): run_for calls it whenever its trigger fires."""
+        """Attach a writer (taichimyxo.writers): run calls it whenever its trigger fires."""
         self.writers.append(writer)
 
-    def run_for(self, seconds=None, minutes=None, hours=None, steps=None, writers=(), **options):
-        """Advance by simulated time (one of seconds, minutes, hours, on the scene's step grid) or steps, with the
-        attached writers and `writers` (taichimyxo.driver.drive; options: catch_signals, chunk_steps, ...). Attached
-        writers stay open for the next call and are closed by close(). Returns the driver's Run."""
-        from .driver import close_writers, drive, steps_for
-        run = drive(self, steps_for(self, seconds, minutes, hours, steps), [*self.writers, *writers], close=False,
-                    **options)
-        close_writers(writers)
+    def run(self, *, seconds=None, minutes=None, hours=None, steps=None, writers=(), progress: bool = False,
+            **options):
+        """Run for simulated time (one of seconds, minutes, hours, on the scene's step grid) or steps, with the
+        attached writers and `writers` (taichimyxo.run_loop.drive; options: catch_signals, chunk_steps, rollback, ...).
+        progress: show the progress line. `writers` are closed at the end; attached ones stay open for the next call
+        and are closed by close(). Returns the run loop's Run (status "completed", or "interrupted" after Ctrl-C, or
+        "failed" with Run.broken naming a broken invariant)."""
+        from .run_loop import close_writers, drive, steps_for
+        n = steps_for(self, seconds, minutes, hours, steps)
+        extra = list(writers)
+        if progress:
+            from .writers import ProgressLine
+            extra.insert(0, ProgressLine(self.scene.name, self.step_count + n))
+        run = drive(self, n, [*self.writers, *extra], close=False, **options)
+        close_writers(extra)
         return run
 
     # ------------------------------------------------------------------ measurements
     def snapshot_speed(self) -> None:
         """Start a speed window: the displayed speed is |x(t) - x(t - window)| / window (docs/model.md)."""
         self.state.snapshot(self.step_count)
+
+    @property
+    def speed_window_start(self) -> int:
+        """The step the current speed window opened at (snapshot_speed)."""
+        return self.state.snap_step
 
     def particle_speed(self) -> np.ndarray:
         """(n_cells, N) µm/min averaged since the last snapshot_speed."""
@@ -261,7 +292,7 @@ class Simulation:
 
     def close(self) -> None:
         if self.writers:
-            from .driver import close_writers
+            from .run_loop import close_writers
             close_writers(self.writers)
             self.writers = []
         self.model.close()
@@ -276,16 +307,29 @@ class Simulation:
             backend.simulation_closed()
 
 
-def _twin(f, fb):
-    """A field of f's type and shape, placed by fb."""
+def _twin(f, builder):
+    """A field of f's type and shape, placed by builder."""
     if isinstance(f, ti.MatrixField):
         t = ti.Vector.field(f.n, f.dtype) if f.ndim == 1 else ti.Matrix.field(f.n, f.m, f.dtype)
     else:
         t = ti.field(f.dtype)
-    fb.dense(ti.axes(*range(len(f.shape))), f.shape).place(t)
+    builder.dense(ti.axes(*range(len(f.shape))), f.shape).place(t)
     return t
 
 
-def make_simulation(scene, **kw) -> Simulation:
-    """The scene's Simulation (its integrator chosen by run.integrator). Kept for callers of the former API."""
-    return Simulation(scene, **kw)
+def initial_state(scene, progress=None):
+    """(positions, engine_direction) placed by the scene's start, before Taichi starts: a density the start cannot
+    place is a SceneError. progress: called (placed, n, tries) while placing."""
+    from .placement import PlacementError, initial_configuration
+    try:
+        return initial_configuration(scene, progress=progress)
+    except PlacementError as e:
+        raise SceneError(f"population: the {scene.start!r} start cannot place the cells ({e}); lower "
+                         f"population.density_cells_per_cm2 or population.cells, or enlarge the domain"
+                         f"{scene.preview_note()}") from None
+
+
+def init_backend(scene, arch: str | None = None, threads: int | None = None) -> str:
+    """Taichi for the scene's precision on `arch` with `threads` (None, None: as it already runs, else the CPU with
+    all cores or TAICHIMYXO_THREADS); an unavailable GPU falls back to the CPU. Returns the arch used."""
+    return backend.ensure(arch, threads, default_fp="f64" if scene.precision == "f64" else None)

@@ -121,7 +121,7 @@ class State:
     """Positions x (wrapped), engine directions ke = ±1 (+1: particle 0 is the head) and the speed-window snapshot.
     `loops` (taichimyxo/launch.py) is how every unit's kernels launch their loops: the arch's shape unless given."""
 
-    def __init__(self, layout: Layout, fb: ti.FieldsBuilder, loops: LoopShape | None = None):
+    def __init__(self, layout: Layout, builder: ti.FieldsBuilder, loops: LoopShape | None = None):
         self.layout = L = layout
         self.N, self.Lx, self.Ly = L.N, L.Lx, L.Ly
         self.n_cells, self.n_p, self.n_s = L.n_cells, L.n_particles, L.n_segments
@@ -129,21 +129,21 @@ class State:
         self.fdt = ti.f64 if L.precision == "f64" else ti.f32
         self.loops = loops or shape_for(self.n_s)
         self.serial = self.loops.serial                     # loops over items in one thread (CPU, small systems)
-        self.x = self.vec(fb, self.n_p, self.pdt)            # positions, wrapped
-        self.x_snap = self.vec(fb, self.n_p, self.pdt)       # positions at the start of the speed window
-        self.ke = self.scalar(fb, self.n_cells, ti.i32)      # engine direction k_e = ±1
+        self.x = self.vec(builder, self.n_p, self.pdt)            # positions, wrapped
+        self.x_snap = self.vec(builder, self.n_p, self.pdt)       # positions at the start of the speed window
+        self.ke = self.scalar(builder, self.n_cells, ti.i32)      # engine direction k_e = ±1
         self.snap_step = 0
 
     @staticmethod
-    def vec(fb, n, dtype):
+    def vec(builder, n, dtype):
         f = ti.Vector.field(2, dtype=dtype)
-        fb.dense(ti.i, n).place(f)
+        builder.dense(ti.i, n).place(f)
         return f
 
     @staticmethod
-    def scalar(fb, n, dtype):
+    def scalar(builder, n, dtype):
         f = ti.field(dtype=dtype)
-        fb.dense(ti.i, n).place(f)
+        builder.dense(ti.i, n).place(f)
         return f
 
     # ------------------------------------------------------------------ layout, in kernels

@@ -5,11 +5,11 @@ A trigger is called with the step number and says whether its writer acts at tha
 - :class:`Periodic` fires on the scene's step grid, every ``seconds`` / ``minutes`` of simulated time (rounded to
   whole steps, at least one, as the scene rounds ``output.frame_interval_min``) or every ``steps`` steps, at the
   multiples of its period counted from step 0 (so a resumed run fires at the same steps as an uninterrupted one).
-  The driver stops the simulation exactly at the steps it fires (:func:`taichimyxo.driver.drive`).
-- :class:`WallClock` fires at most once every ``seconds`` of wall-clock time; the driver asks it between chunks of
+  the run loop stops the simulation exactly at the steps it fires (:func:`taichimyxo.run_loop.drive`).
+- :class:`WallClock` fires at most once every ``seconds`` of wall-clock time; the run loop asks it between chunks of
   steps (at most ``chunk_steps`` apart). For checkpoints: it never decides where the simulation stops.
 
-Simulated-time triggers know their period in steps once bound to the time step (``bind(dt)``; the driver binds
+Simulated-time triggers know their period in steps once bound to the time step (``bind(dt)``; the run loop binds
 them to the simulation's scene step).
 """
 from __future__ import annotations
@@ -92,5 +92,5 @@ class WallClock(Trigger):
 
 
 def is_step_trigger(trigger) -> bool:
-    """True for triggers the driver schedules stops for (they define next_after / prev_before)."""
+    """True for triggers the run loop schedules stops for (they define next_after / prev_before)."""
     return trigger is not None and hasattr(trigger, "next_after") and hasattr(trigger, "prev_before")

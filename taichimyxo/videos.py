@@ -7,7 +7,7 @@ completed), resumes an interrupted one from its checkpoint, and shows overall pr
 the current run's files; run again to continue.
 
 With --jobs N (N > 1) or --executor slurm the videos run in parallel through a sweep executor
-(taichimyxo.sweep.driver): each video gets a run folder OUT/.jobs/NAME/ (its resolved scene, its log, its result)
+(taichimyxo.sweep.orchestrator): each video gets a run folder OUT/.jobs/NAME/ (its resolved scene, its log, its result)
 and writes its files into OUT as before; a video that can be rendered from another's trajectory (S8 from S3) waits
 for that one. A failed video is reported and the others go on."""
 from __future__ import annotations
@@ -43,7 +43,7 @@ def _up_to_date(sc: Scene, out: Path) -> bool:
 def regenerate(preview: bool = False, only: str | None = None, out_dir: str = "videos", arch: str = "cpu",
                executor: str = "local", jobs: int = 1, options: dict | None = None) -> int:
     """Make the videos (module docstring); executor, jobs, options: in parallel through a sweep executor
-    (taichimyxo.sweep.driver) when jobs > 1 or executor is not local, with its options (e.g. Slurm's)."""
+    (taichimyxo.sweep.orchestrator) when jobs > 1 or executor is not local, with its options (e.g. Slurm's)."""
     names = VIDEO_SCENES
     if only:
         # any scene `list` shows (the supplementary videos S1-S17 and the figure panels such as S2FigA)
@@ -55,7 +55,7 @@ def regenerate(preview: bool = False, only: str | None = None, out_dir: str = "v
                              f"{', '.join(known)}")
     ex = None
     if executor != "local" or jobs > 1:
-        from .sweep.driver import executor_module
+        from .sweep.orchestrator import executor_module
         # a missing executor or a bad option is bad input, refused before anything is written
         ex = executor_module(executor)
         opts = ex.check_options(options or {}) if hasattr(ex, "check_options") else dict(options or {})
@@ -89,8 +89,8 @@ def regenerate(preview: bool = False, only: str | None = None, out_dir: str = "v
 
 
 def in_parallel(scenes: list, out: Path, arch: str, ex, jobs: int, opts: dict) -> int:
-    """The videos through the executor module `ex` (taichimyxo.sweep.driver), `jobs` at a time; those that can reuse
-    an earlier one's trajectory (the same physics and seed: S8 and S3) in a second wave. Exit status: 0, 1 when a
+    """The videos through the executor module `ex` (taichimyxo.sweep.orchestrator), `jobs` at a time; those that can
+    reuse an earlier one's trajectory (the same physics and seed: S8 and S3) in a second wave. Exit status: 0, 1 when a
     video failed, 130 when interrupted."""
     from .sweep.progress import SweepProgress
     from .sweep.rundir import prepare_job

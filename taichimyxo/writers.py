@@ -1,5 +1,5 @@
 """Writers: the outputs of a run, each a small object with a trigger, attached to the run loop
-(:func:`taichimyxo.driver.drive`) the way HOOMD-blue attaches ``hoomd.write.GSD(trigger=...)``.
+(:func:`taichimyxo.run_loop.drive`) the way HOOMD-blue attaches ``hoomd.write.GSD(trigger=...)``.
 
     import taichimyxo as tm
     traj = tm.writers.Trajectory("out/S3.gsd", trigger=tm.Periodic(minutes=1))
@@ -28,8 +28,8 @@ import math
 import os
 from pathlib import Path
 
-from .driver import InvariantBroken
-from .progress import Progress
+from .run_loop import InvariantBroken
+from .status_line import Progress
 from .triggers import WallClock
 
 SUMMARY_VERSION = 1
@@ -235,14 +235,14 @@ class InvariantCheck(Writer):
 
 # ------------------------------------------------------------------------------------------------ progress, summary
 class ProgressLine(Writer):
-    """The one status line on stderr (taichimyxo.progress.Progress), from the start to `total_steps`."""
+    """The one status line on stderr (taichimyxo.status_line.Progress), from the start to `total_steps`."""
 
     def __init__(self, name: str, total_steps: int, stream=None):
         self.name, self.total, self.stream = name, total_steps, stream
         self.bar, self._run = None, None
 
     def start(self, run) -> None:
-        from .progress import starting_note
+        from .status_line import starting_note
         self._run = run
         self.bar = Progress(self.name, self.total, run.sim.scene.dt, run.step, stream=self.stream,
                             starting=starting_note(run.sim.scene))
@@ -252,7 +252,7 @@ class ProgressLine(Writer):
         first = self.bar.measured_from is None
         self.bar.update(run.step, force=first)        # the first chunk compiled the kernels: say it is done
         if first and self.bar.measured_from is not None:
-            from .progress import remember_first_chunk
+            from .status_line import remember_first_chunk
             remember_first_chunk(run.sim.scene, self.bar.first_chunk_seconds())
 
     def close(self) -> None:
@@ -326,7 +326,7 @@ def run_summary(run, path: Path, files: dict, checkpoint, resumed: bool, setup_s
         summary["files"]["checkpoint"] = Path(checkpoint).name
     if run.broken is not None:
         summary["invariant_broken"] = run.broken
-    # each chunk redone at split steps after a broken invariant (driver.py), since the start of the run
+    # each chunk redone at split steps after a broken invariant (run_loop.py), since the start of the run
     summary["rollbacks"] = [{"step": st, "simulated_seconds": t, "split": k} for st, t, k in sim.rollbacks]
     if run.gave_up:
         summary["gave_up"] = True

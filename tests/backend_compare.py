@@ -58,7 +58,7 @@ def capture(scene, positions, engine_direction, backend: Backend, steps: int, fo
     after `steps` steps. Builds, uses and closes its own Simulation."""
     from taichimyxo.simulation import Simulation
     start_backend(backend, scene.precision)
-    sim = Simulation(scene, positions=positions, engine_direction=engine_direction, loop_shape=backend.loop_shape)
+    sim = Simulation.from_positions(scene, positions, engine_direction, loop_shape=backend.loop_shape)
     try:
         nl = sim.neighbours
         n = nl.nbr_n.to_numpy()
@@ -68,7 +68,7 @@ def capture(scene, positions, engine_direction, backend: Backend, steps: int, fo
             out["guide"] = _rows(nl.guide, nl.guide_n.to_numpy())
         if forces:
             out["forces"] = {k: v for k, v in sim.forces().items() if k != "tangent"}
-        sim.run(steps)
+        sim.advance(steps)
         out.update(positions=sim.positions(), ke=sim.engine_direction().astype(int), rebuilds=sim.rebuilds,
                    cg_iterations=sim.solver_stats().get("cg_iterations", 0))
         if sim.model.slime is not None:

@@ -6,8 +6,8 @@
   dead fields.
 - `small_scene(cells=2, box=(20, 20), **sections)`: simtools.build_small_scene, a validated Scene on a small periodic
   box with the movie off; sections are merged over it, e.g. small_scene(3, guiding={"kind": "active"}).
-- `make_sim(scene, positions=None, engine_direction=None)`: the scene integrator's Simulation (make_simulation),
-  closed (fields freed) after the test.
+- `make_sim(scene, positions=None, engine_direction=None)`: the scene's Simulation (Simulation, or
+  Simulation.from_positions when positions are given), closed (fields freed) after the test.
 - `shapes`: simtools' chains to place by hand (cell, arc_cell, ring_radius_for_gap), in µm.
 The builders themselves (chains, scenes, simulations) are in tests/simtools.py, the one place they are written.
 - marker `slow`: tests that take more than a few seconds.
@@ -74,11 +74,11 @@ def small_scene():
 
 @pytest.fixture
 def make_sim(ti_cpu):
-    from taichimyxo.simulation import make_simulation
+    from taichimyxo.simulation import Simulation
     made = []
 
     def make(scene, positions=None, engine_direction=None):
-        sim = make_simulation(scene, positions=positions, engine_direction=engine_direction)
+        sim = Simulation(scene) if positions is None else Simulation.from_positions(scene, positions, engine_direction)
         made.append(sim)
         return sim
 

@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from taichimyxo import backend
-from taichimyxo.init import straight_cell
+from taichimyxo.placement import straight_cell
 from taichimyxo.scene import Scene
 
 backend.init("cpu", default_fp="f64")      # f64 constants, so f64 scenes are exact to ~1e-12
@@ -59,12 +59,12 @@ def build_small_scene(cells: int = 2, box=(20.0, 20.0), **sections) -> Scene:
 def sim_with(positions, ke=None, box=(20.0, 20.0), **sections):
     """The scene integrator's simulation of the given chains ((N, 2) or (n, N, 2)), k_e = +1 by default. Not closed
     after the test: use the make_sim fixture for that."""
-    from taichimyxo.simulation import make_simulation
+    from taichimyxo.simulation import Simulation
     pos = np.asarray(positions, float)
     if pos.ndim == 2:
         pos = pos[None]
     ke = np.ones(len(pos), int) if ke is None else np.asarray(ke)
-    return make_simulation(build_small_scene(len(pos), box=box, **sections), positions=pos, engine_direction=ke)
+    return Simulation.from_positions(build_small_scene(len(pos), box=box, **sections), pos, ke)
 
 
 # --------------------------------------------------------------- numpy reference energies (docs/model.md terms 1, 2, 4)
@@ -87,3 +87,27 @@ def fd_gradient(fun, pos, h=1e-6):
         em = fun(p)
         g[i] = (ep - em) / (2 * h)
     return g
+
+
+# --------------------------------------------------------------- the command line, as a user runs it
+import os  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def cli(*args, cwd=None):
+    env = dict(os.environ, TAICHIMYXO_THREADS="2")
+    return subprocess.run([sys.executable, "-m", "taichimyxo", *map(str, args)], capture_output=True, text=True,
+                          cwd=cwd or REPO, env=env, timeout=600)
+
+
+def error_line(p, code=2):
+    lines = [ln for ln in p.stderr.splitlines() if ln.strip()]
+    assert p.returncode == code, (p.returncode, p.stderr, p.stdout)
+    assert "Traceback" not in p.stderr + p.stdout, p.stderr
+    errors = [ln for ln in lines if ln.startswith("taichimyxo: error: ")]
+    assert len(errors) == 1, p.stderr
+    return errors[0]

@@ -106,17 +106,22 @@ def test_continued_run_writes_what_one_run_writes(ti_cpu, tmp_path, small_scene)
         two.close()
 
 
-def test_attached_writers_stay_open_across_run_for(ti_cpu, tmp_path, small_scene):
-    """sim.attach keeps a writer across run_for calls (closed by sim.close); a writer passed to one call is closed
-    after it; run(n, dt) honours dt and the simulated time follows it."""
+def test_attached_writers_stay_open_across_runs(ti_cpu, tmp_path, small_scene):
+    """sim.attach keeps a writer across run calls (closed by sim.close); a writer passed to one call is closed
+    after it; advance(n, dt) honours dt and the simulated time follows it. tm.Simulation is the class; run takes
+    keywords only, so a step count meant for advance cannot be read as seconds."""
     import taichimyxo as tm
+    from taichimyxo.simulation import Simulation
     sim = tm.Simulation(small_scene(4, run={"dt_ms": 1.0}))
     try:
+        assert tm.Simulation is Simulation and isinstance(sim, tm.Simulation)
+        with pytest.raises(TypeError):
+            sim.run(10)
         sim.attach(tm.writers.Trajectory(tmp_path / "a.gsd", trigger=tm.Periodic(seconds=0.5)))
         once = tm.writers.Trajectory(tmp_path / "b.gsd", trigger=tm.Periodic(seconds=0.5))
-        assert sim.run_for(seconds=1.2, writers=[once]).completed and sim.step_count == 1200
-        assert sim.run_for(steps=800).completed and sim.time == pytest.approx(2.0)
-        sim.run(4, 0.25e-3)
+        assert sim.run(seconds=1.2, writers=[once]).completed and sim.step_count == 1200
+        assert sim.run(steps=800).completed and sim.time == pytest.approx(2.0)
+        sim.advance(4, 0.25e-3)
         assert sim.step_count == 2004 and sim.time == pytest.approx(2.001)
     finally:
         sim.close()
@@ -140,7 +145,7 @@ def test_checkpoint_and_summary_writers(ti_cpu, tmp_path, small_scene):
         assert run.status == "interrupted" and sim.step_count == 700 and ck.is_file()
         d = json.loads((tmp_path / "s.json").read_text())
         assert d["status"] == "interrupted" and d["steps"] == 700 and d["files"]["checkpoint"] == ck.name
-        again = tm.Simulation(sc, checkpoint=ck)
+        again = tm.Simulation.from_checkpoint(sc, ck)
         try:
             assert again.step_count == 700 and np.array_equal(again.positions(), sim.positions())
         finally:

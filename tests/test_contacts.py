@@ -193,7 +193,7 @@ def test_contact_forces_are_minus_energy_gradient(sim64, case):
 
 def test_strain_energy_is_the_contact_energy_per_segment(small_scene, make_sim):
     """A dense aligned patch: the per-segment strain energy (S8, Fig 2F, Fig 4B) sums to the contact energy."""
-    from taichimyxo.init import initial_configuration
+    from taichimyxo.placement import initial_configuration
     sc = small_scene(0, box=(10.0, 10.0), population={"start": "aligned", "density_cells_per_cm2": 4e7},
                      output={"strain": True, "movie": False}, run={"precision": "f64"})
     pos, ke = initial_configuration(sc)

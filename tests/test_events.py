@@ -37,11 +37,11 @@ def test_logged_reversals_are_the_polarity_flips_in_the_frames(tmp_path):
     import taichimyxo as tm
     from simtools import build_small_scene
     from taichimyxo.event_log import EventLog
-    from taichimyxo.simulation import make_simulation
+    from taichimyxo.simulation import Simulation
     from taichimyxo.trajectory import read_frames
     scene = build_small_scene(16, box=(25.0, 25.0), guiding={"kind": "active"}, run={"dt_ms": 2.0},
                               reversals={"enabled": True, "period_min": 0.02, "suppression": True})
-    sim = make_simulation(scene)
+    sim = Simulation(scene)
     gsd = str(tmp_path / "run.gsd")
     every = 20                                   # frames 40 ms apart, shorter than the shortest period (120 ms)
     run = tm.run(sim, steps=800, writers=[tm.writers.Trajectory(gsd, trigger=tm.Periodic(steps=every)),

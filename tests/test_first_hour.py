@@ -51,7 +51,7 @@ def stub_simulations(monkeypatch):
     monkeypatch.setattr(taichimyxo.scene_run, "find_reusable_trajectory", no_scene)   # scene: after the folder check
     monkeypatch.setattr(taichimyxo.bench, "throughput", lambda *a, **k: None)
     monkeypatch.setattr(taichimyxo.videos.subprocess, "call", lambda *a, **k: 0)
-    import taichimyxo.sweep.driver as drv
+    import taichimyxo.sweep.orchestrator as drv
 
     class NoExecutor:
         @staticmethod
@@ -119,7 +119,7 @@ def test_render_out_takes_an_mp4_path_and_a_folder(tmp_path, traj, capsys):
 
 # ------------------------------------------------------------------------------------------------ progress
 def test_progress_gives_no_time_left_until_the_rate_is_measured_after_compiling():
-    from taichimyxo.progress import Progress, starting_note
+    from taichimyxo.status_line import Progress, starting_note
     log = io.StringIO()
     bar = Progress("S3", 1000, 0.002, 0, stream=log, interval_s=0, starting=starting_note(Scene.load("S3")))
     bar.update(0, force=True)

@@ -85,7 +85,7 @@ def test_free_straight_cell_moves_at_v_b(ke, precision):
     sim = sim_with(pos, ke=[ke], run={"precision": precision, "dt_ms": 1.0})
     sim.snapshot_speed()
     x0 = sim.positions()[0].mean(0)
-    sim.run(3000)
+    sim.advance(3000)
     x1 = sim.positions()[0].mean(0)
     v = np.linalg.norm(x1 - x0) / sim.time * 60.0              # µm/min (no wrap: 0.2 µm travelled)
     assert v == pytest.approx(4.0, rel=0.005)

@@ -43,7 +43,7 @@ def every_unit_scene(precision="mixed", integrator="explicit", particles=8):
 @functools.lru_cache(maxsize=2)
 def start_state(particles=8):
     """The scene's random start, placed once in numpy: both backends start from the same numbers."""
-    from taichimyxo.init import initial_configuration
+    from taichimyxo.placement import initial_configuration
     return initial_configuration(every_unit_scene(particles=particles))
 
 
@@ -94,14 +94,14 @@ def test_the_run_loop_copies_to_the_host_only_where_a_writer_fires(monkeypatch):
     import taichi as ti
     from backend_compare import start_backend
 
-    from taichimyxo.driver import drive
+    from taichimyxo.run_loop import drive
     from taichimyxo.simulation import Simulation
     from taichimyxo.triggers import Periodic
     from taichimyxo.writers import Writer
 
     start_backend(CPU, "mixed")
     pos, ke = start_state(LIGHT)
-    sim = Simulation(every_unit_scene(particles=LIGHT), positions=pos, engine_direction=ke,
+    sim = Simulation.from_positions(every_unit_scene(particles=LIGHT), pos, ke,
                      loop_shape="cpu")                                  # compiled for the comparison above
     at = []
 
@@ -179,9 +179,9 @@ def test_cuda_free_cell_moves_at_v_b(cuda, precision):
     scene = build_small_scene(1, run={"precision": precision, "dt_ms": 1.0})
     start_backend(CUDA, precision)
     pos = cell((7.3, 11.1), 33.0)
-    sim = Simulation(scene, positions=pos[None], engine_direction=np.ones(1))
+    sim = Simulation.from_positions(scene, pos[None], np.ones(1))
     x0 = sim.positions()[0].mean(0)
-    sim.run(3000)
+    sim.advance(3000)
     v = np.linalg.norm(sim.positions()[0].mean(0) - x0) / sim.time * 60.0
     report("cuda free speed", precision, {"speed_um_per_min": v})
     sim.close()

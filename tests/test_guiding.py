@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from simtools import arc_cell, build_small_scene, cell, sim_with
-from taichimyxo.simulation import make_simulation
+from taichimyxo.simulation import Simulation
 
 W = 0.5
 L0 = 4.5 / 7
@@ -24,7 +24,7 @@ def in_line(gap, leader_x=12.0, y=10.0, lateral=0.0):
 def centroid_velocity(sim, steps=20):
     p0 = sim.positions().mean(1)
     t0 = sim.time
-    sim.run(steps)
+    sim.advance(steps)
     return (sim.positions().mean(1) - p0) / (sim.time - t0) * 60.0      # µm/min, (n_cells, 2)
 
 
@@ -41,7 +41,7 @@ def test_active_following_pulls_the_follower_up_to_3_v_b(distance):
     # over 30 s the follower catches up and stays within guiding range, never overtaking
     gaps = []
     for _ in range(30):
-        sim.run(1000)
+        sim.advance(1000)
         p = sim.positions()
         gaps.append(np.linalg.norm(p[0, -1] - p[1, 0]) - W)
     assert max(gaps) < 0.25 and min(gaps) > -0.05
@@ -67,7 +67,7 @@ def test_passive_following_turns_but_never_speeds_up(distance):
     axial = []
     for _ in range(40):
         p0 = sim.positions()
-        sim.run(50)
+        sim.advance(50)
         p1 = sim.positions()
         axis = p0[1, 0] - p0[1, -1]
         axis /= np.linalg.norm(axis)
@@ -131,7 +131,7 @@ def test_a_cell_crossing_a_slime_trail_at_30_degrees_turns_onto_it(trail_sign):
     rows = slice(int(9.75 / 0.25), int(10.25 / 0.25))
     grid[:, rows, 0] = trail_sign
     sim.model.slime.slime.from_numpy(grid)
-    sim.run(30000)                               # 60 s: the cell reaches the trail and follows it
+    sim.advance(30000)                               # 60 s: the cell reaches the trail and follows it
     p = sim.positions()[0]
     heading = p[0] - p[1]
     angle = math.degrees(math.atan2(heading[1], heading[0]))
@@ -144,7 +144,7 @@ def test_deposition_writes_the_rear_tangent_under_the_rear_particle():
     c = cell((10.0, 10.0), 37.0)
     for ke in (1, -1):
         sim = sim_with(c, ke=[ke], slime={"enabled": True})
-        sim.run(1)
+        sim.advance(1)
         p = sim.positions()[0]
         rear, nxt = (p[-1], p[-2]) if ke > 0 else (p[0], p[1])
         t = (nxt - rear) / np.linalg.norm(nxt - rear)
@@ -157,13 +157,13 @@ def test_deposition_writes_the_rear_tangent_under_the_rear_particle():
 
 def test_observed_reversal_intervals_match_the_period_distribution():
     T = 3.0                                      # s
-    sim = make_simulation(build_small_scene(box=(60.0, 60.0), cells=60,
+    sim = Simulation(build_small_scene(box=(60.0, 60.0), cells=60,
                                             reversals={"enabled": True, "period_min": T / 60}, run={"dt_ms": 2.0}))
     ke_prev = sim.engine_direction()
     last = np.full(60, np.nan)
     intervals = []
     for _ in range(6000):                        # 60 s
-        sim.run(5)
+        sim.advance(5)
         ke = sim.engine_direction()
         flipped = np.nonzero(ke != ke_prev)[0]
         for c in flipped:
@@ -188,7 +188,7 @@ def test_suppression_skips_reversals_during_head_to_tail_interaction_only(suppre
     flips = np.zeros(3, int)
     prev = sim.engine_direction()
     for _ in range(500):                          # 5 s
-        sim.run(10)
+        sim.advance(10)
         ke = sim.engine_direction()
         flips += ke != prev
         prev = ke
@@ -237,13 +237,114 @@ def test_only_the_effects_a_scene_uses_are_allocated(name, expected):
     from taichimyxo.scene import Scene
     sc = Scene.load(name, {"domain": {"width_um": 20.0, "height_um": 20.0}, "population": {"cells": 4},
                            "output": {"movie": False}})
-    sim = make_simulation(sc)
+    sim = Simulation(sc)
     have = {k for k in sim.allocated_fields() if k in EFFECT_FIELDS}
     assert have == expected
     units = {u.name for u in sim.model.units}             # an effect's unit exists only when the scene uses it
     assert ("slime" in units) == ("slime" in expected)
     assert ("reversals" in units) == ("rev_clock" in expected)
     assert ("strain" in units) == ("strain_seg" in expected)
-    assert ("guiding" in units) == bool(expected & {"g_head", "interacting"})
+    assert ("head_to_tail" in units) == bool(expected & {"g_head", "interacting"})
     assert sim.integrator.v is None
+    sim.close()
+
+
+F64 = {"precision": "f64"}
+
+
+@pytest.mark.parametrize("ke", [1, -1])
+def test_guiding_pull_acts_on_the_head_for_either_engine_direction(ke):
+    """k_e = -1 makes particle N - 1 the head and particle 0 the tail: the pull goes to particle N - 1, toward the
+    leader's tail (particle 0 when the leader also has k_e = -1)."""
+    g = 0.15
+    leader = cell((12.0, 10.0), 180.0)                     # particle 0 at +x
+    follower = cell((12.0 - 4.5 - W - g, 10.0), 180.0)
+    if ke < 0:                                             # same places, particles numbered the other way round
+        leader, follower = leader[::-1].copy(), follower[::-1].copy()
+    sim = sim_with(np.stack([leader, follower]), ke=[ke, ke], guiding={"kind": "active"}, run=F64)
+    f = sim.forces()
+    head = 0 if ke > 0 else -1
+    guide = f["total"][1] - f["internal"][1] - f["contact"][1]
+    engine = 100.0 / 8 * f["tangent"][1]
+    pull = guide - engine
+    assert pull[head, 0] == pytest.approx(800.0 * g, rel=1e-6)           # toward the leader, +x
+    mask = np.ones(8, bool)
+    mask[head] = False
+    assert np.abs(pull[mask]).max() < 1e-9
+    sim.close()
+
+
+def test_guiding_sums_over_several_leaders():
+    """A follower's head within range of two leaders' tails feels the sum of both pulls (docs/model.md term 5)."""
+    follower = cell((6.0, 10.0), 180.0)                    # head (particle 0) at x = 8.25, moving +x
+    head = follower[0]
+    # two leaders moving +x, their tails (particle 7) just ahead of the head, above and below its axis
+    up = cell((0, 0), 180.0 - 30.0)
+    up = up - up[-1] + head + np.array([0.62, 0.25])
+    down = cell((0, 0), 180.0 + 30.0)
+    down = down - down[-1] + head + np.array([0.62, -0.25])
+    far = cell((15.0, 3.0), 0.0)
+    sim = sim_with(np.stack([follower, up, down]), ke=[1, 1, 1], box=(20.0, 20.0), guiding={"kind": "active"},
+                   run=F64)
+
+    def pull(pos):
+        sim.set_state(pos, np.ones(3))
+        f = sim.forces()
+        return (f["total"][0] - f["internal"][0] - f["contact"][0] - 100.0 / 8 * f["tangent"][0])[0]
+
+    both = pull(np.stack([follower, up, down]))
+    only_up = pull(np.stack([follower, up, far]))
+    only_down = pull(np.stack([follower, far, down]))
+    assert np.linalg.norm(only_up) > 10.0 and np.linalg.norm(only_down) > 10.0
+    np.testing.assert_allclose(both, only_up + only_down, rtol=1e-9, atol=1e-9)
+    assert abs(both[1]) < 0.2 * abs(both[0])               # the lateral pulls nearly cancel, the forward ones add
+    sim.close()
+
+
+def test_slime_is_overwritten_by_the_latest_cell_and_persists():
+    """Two cells each run along an older trail laid the other way (antiparallel: it exerts no steering force, whose
+    normal component is zero): each rear particle overwrites the elements it passes with its own tangent, and
+    every element no rear passes keeps its old vector (MODEL.md term 6: trails persist until overwritten)."""
+    def ix(x):
+        return int(math.floor(x / 0.25))
+    ya, xb = 10.125, 15.125                       # element centres, so round-off cannot move a rear off the row
+    a = cell((4.0, ya), 180.0)                    # moving +x along the row, rear from x = 1.75 to 5.75 in 60 s
+    b = cell((xb, 12.0), 90.0)                    # moving -y along the column, rear from y = 14.25 to 10.25
+    sim = sim_with(np.stack([a, b]), box=(20.0, 20.0), slime={"enabled": True}, run={"dt_ms": 2.0})
+    grid = np.zeros((sim.model.slime.sgx, sim.model.slime.sgy, 2), np.float32)
+    grid[:, ix(ya)] = (-1.0, 0.0)                 # an older trail along the row, laid toward -x
+    grid[ix(xb), :] = (0.0, 1.0)                  # and one along the column, laid toward +y
+    sim.model.slime.slime.from_numpy(grid)
+    sim.advance(30000)                            # 60 s
+    g = sim.model.slime.slime.to_numpy()
+    for x in (2.5, 3.0, 4.0, 5.0):                # passed by a's rear: overwritten with a's tangent
+        np.testing.assert_allclose(g[ix(x), ix(ya)], (1.0, 0.0), atol=2e-3)
+    for y in (11.0, 12.0, 13.0, 14.0):            # passed by b's rear
+        np.testing.assert_allclose(g[ix(xb), ix(y)], (0.0, -1.0), atol=2e-3)
+    for x in (0.5, 9.0, 12.0):                    # never under a rear: the old trail persists
+        np.testing.assert_array_equal(g[ix(x), ix(ya)], (-1.0, 0.0))
+    for y in (2.0, 6.0, 9.0, 16.0):
+        np.testing.assert_array_equal(g[ix(xb), ix(y)], (0.0, 1.0))
+    # the cells ran straight (no steering by an antiparallel trail)
+    p = sim.positions()
+    assert abs(p[0, :, 1].mean() - ya) < 0.05 and abs(p[1, :, 0].mean() - xb) < 0.05
+    sim.advance(2500)                             # 5 s more: what was written stays
+    g2 = sim.model.slime.slime.to_numpy()
+    np.testing.assert_array_equal(g2[ix(3.0), ix(ya)], g[ix(3.0), ix(ya)])
+    np.testing.assert_array_equal(g2[ix(xb), ix(13.0)], g[ix(xb), ix(13.0)])
+    sim.close()
+
+
+@pytest.mark.parametrize("gap", [-0.05, 0.0, 0.1])
+def test_overlap_counts_as_interaction_for_suppression(gap):
+    """Head overlapping the leader's tail (gap <= 0, collisions act and the guiding force is zero) is still a
+    head-to-tail interaction: the flag is set on both cells."""
+    leader = cell((12.0, 10.0), 180.0)
+    follower = cell((12.0 - 4.5 - W - gap, 10.0), 180.0)
+    loner = cell((10.0, 17.0), 0.0)
+    sim = sim_with(np.stack([leader, follower, loner]), box=(30.0, 30.0), guiding={"kind": "active"},
+                   reversals={"enabled": True, "suppression": True}, run=F64)
+    sim.forces()
+    flags = sim.model.head_to_tail.interacting.to_numpy().any(axis=1)   # per cell: head or tail end
+    assert flags[1] != 0 and flags[0] != 0 and flags[2] == 0
     sim.close()

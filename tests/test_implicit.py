@@ -29,10 +29,10 @@ def _far():
     return cell((3.0, 3.0), 0.0)
 
 
-def run_for(sim, seconds, dt_ms):
+def advance_for(sim, seconds, dt_ms):
     """Advance by `seconds` with step dt_ms (the sim's compiled scene may have another default step)."""
     dt = dt_ms * 1e-3
-    sim.run(int(round(seconds / dt)), dt)
+    sim.advance(int(round(seconds / dt)), dt)
     return sim.positions()
 
 
@@ -40,8 +40,8 @@ def run_for(sim, seconds, dt_ms):
 def pair():
     """(explicit, implicit) simulations of two flexible cells; states are loaded per test."""
     pos = np.stack([cell((10.0, 10.0)), _far()])
-    ex = Simulation(_scene("explicit", 0.5), positions=pos, engine_direction=np.ones(2))
-    im = Simulation(_scene("imex", 50.0), positions=pos, engine_direction=np.ones(2))
+    ex = Simulation.from_positions(_scene("explicit", 0.5), pos, np.ones(2))
+    im = Simulation.from_positions(_scene("imex", 50.0), pos, np.ones(2))
     yield ex, im
     ex.close()
     im.close()
@@ -52,7 +52,7 @@ def test_free_straight_cell_moves_at_v_b(pair, dt_ms):
     _, im = pair
     pos = np.stack([cell((10.0, 12.0), 30.0), _far()])
     im.set_state(pos, np.array([1, 1]))
-    p = run_for(im, 20.0, dt_ms)
+    p = advance_for(im, 20.0, dt_ms)
     d = p[0].mean(0) - pos[0].mean(0)
     speed = np.linalg.norm(d) / 20.0
     assert speed == pytest.approx(V_B, rel=5e-3)
@@ -70,7 +70,7 @@ def test_bent_cell_relaxes_to_the_same_state(pair):
     out = {}
     for name, sim, dt in (("explicit", ex, 0.5), ("imex", im, 50.0)):
         sim.set_state(pos, ke)
-        out[name] = run_for(sim, 40.0, dt)
+        out[name] = advance_for(sim, 40.0, dt)
     pe, pi = out["explicit"][0], out["imex"][0]
     assert np.abs(bend_angles(pi)).max() < 0.5 * np.abs(bend_angles(pos[0])).max()       # it did relax
     assert np.abs(bend_angles(pi) - bend_angles(pe)).max() < 2e-3
@@ -86,7 +86,7 @@ def test_head_on_jam_is_the_same_fixed_point(pair):
     out = {}
     for name, sim, dt in (("explicit", ex, 0.5), ("imex", im, 50.0)):
         sim.set_state(pos, ke)
-        out[name] = run_for(sim, 10.0, dt)
+        out[name] = advance_for(sim, 10.0, dt)
     np.testing.assert_allclose(out["imex"], out["explicit"], atol=1e-6)
     gap = out["imex"][1, 0, 0] - out["imex"][0, -1, 0]
     assert gap == pytest.approx(0.5 - 100.0 / 1e4, abs=1e-4)      # overlap = F_e / k_c
@@ -107,7 +107,7 @@ def test_pushing_cells_move_at_the_right_speed(pair):
     out = {}
     for name, sim, dt in (("explicit", ex, 0.5), ("imex", im, 50.0)):
         sim.set_state(pos, ke)
-        out[name] = run_for(sim, 20.0, dt)
+        out[name] = advance_for(sim, 20.0, dt)
     dA = {k: p[0, :, 0].mean() - pos[0, :, 0].mean() for k, p in out.items()}
     dB = {k: p[1, :, 0].mean() - pos[1, :, 0].mean() for k, p in out.items()}
     assert dA["explicit"] > 0.5 * (2 / 3) * V_B * 20.0                   # it did push for most of the time
@@ -119,9 +119,9 @@ def test_one_sided_contact_drag_is_wrong():
     """The error the coupled solve avoids: each cell treating its contacts implicitly as if the other body were
     fixed (contacts='diagonal') adds a drag dt k_c to bodies that push each other: at 50 ms A is > 5 % slow."""
     pos, ke = _t_push()
-    sim = Simulation(_scene("imex", 50.0), positions=pos, engine_direction=ke, contacts="diagonal")
+    sim = Simulation.from_positions(_scene("imex", 50.0), pos, ke, contacts="diagonal")
     try:
-        p = run_for(sim, 20.0, 50.0)
+        p = advance_for(sim, 20.0, 50.0)
     finally:
         sim.close()
     dA = p[0, :, 0].mean() - pos[0, :, 0].mean()
@@ -131,8 +131,8 @@ def test_one_sided_contact_drag_is_wrong():
 @pytest.fixture(scope="module")
 def rigid_pair():
     pos = np.stack([cell((10.0, 10.0)), _far()])
-    ex = Simulation(_scene("explicit", 10.0, k_a=1e-15), positions=pos, engine_direction=np.ones(2))
-    im = Simulation(_scene("imex", 10.0, k_a=1e-15), positions=pos, engine_direction=np.ones(2))
+    ex = Simulation.from_positions(_scene("explicit", 10.0, k_a=1e-15), pos, np.ones(2))
+    im = Simulation.from_positions(_scene("imex", 10.0, k_a=1e-15), pos, np.ones(2))
     yield ex, im
     ex.close()
     im.close()
@@ -147,7 +147,7 @@ def test_very_rigid_cells_stable_where_explicit_blows_up(rigid_pair):
     ex.set_state(pos, ke)
     from taichimyxo.simulation import NeighbourOverflow
     try:
-        p = run_for(ex, 0.5, 10.0)
+        p = advance_for(ex, 0.5, 10.0)
         lengths = np.linalg.norm(np.diff(p[0], axis=0), axis=1) / L0
         blew_up = not np.all(np.isfinite(p)) or np.abs(lengths - 1).max() > 0.2 or np.abs(bend_angles(p[0])).max() > 1.0
     except NeighbourOverflow as e:              # a list build found segments beyond 1.5 l0, and stopped the run
@@ -155,7 +155,7 @@ def test_very_rigid_cells_stable_where_explicit_blows_up(rigid_pair):
     assert blew_up
     for dt in (10.0, 100.0):
         im.set_state(pos, ke)
-        p = run_for(im, 5.0, dt)
+        p = advance_for(im, 5.0, dt)
         lengths = np.linalg.norm(np.diff(p[0], axis=0), axis=1) / L0
         assert np.all(np.isfinite(p))
         assert np.abs(lengths - 1).max() < 0.01

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from simtools import error_line
 from taichimyxo.frame import Frame
 from taichimyxo.scene import Scene
 from taichimyxo.trajectory import TrajectoryWriter
@@ -174,7 +175,7 @@ run.dt_ms = [1, 2]
 def test_a_sweep_with_unfinished_runs_is_refused_until_told(tmp_path, capsys):
     from taichimyxo.cli import main
     from taichimyxo.sweep import plan
-    from taichimyxo.sweep.driver import check_earlier_runs
+    from taichimyxo.sweep.orchestrator import check_earlier_runs
     from taichimyxo.sweep.rundir import prepare, state
     f = tmp_path / "s.toml"
     f.write_text(SWEEP)
@@ -223,3 +224,21 @@ def test_interrupted_then_resumed_then_complete_then_overwritten(ti_cpu, tmp_pat
     assert p.returncode == 0, p.stderr
     again = json.loads((out / "S1.json").read_text())
     assert again["completed"] and again["sessions"] == 1 and again["steps"] == done["steps"]
+
+
+# ------------------------------------------------------------------------------------------------ --resume
+SMALL = ["--set", "domain.width_um=20", "--set", "domain.height_um=20"]
+
+
+def test_resume_with_fewer_hours_than_done_is_refused_and_keeps_the_checkpoint(ti_cpu, tmp_path):
+    from taichimyxo.scene_run import run_scene
+    sc = Scene.load("S1", {"domain": {"width_um": 20.0, "height_um": 20.0}, "run": {"dt_ms": 1.0, "hours": 0.01},
+                           "output": {"movie": False}})
+    out = tmp_path / "out"
+    part = run_scene(sc, out_dir=out, stop_after_steps=1500, progress=False)
+    assert part["status"] == "interrupted"
+    before = {f.name: f.read_bytes() for f in out.iterdir()}
+    line = error_line(cli("scene", "S1", "--out", out, "--no-movie", "--resume", *SMALL, "--set", "run.dt_ms=1",
+                          "--hours", "0.0002"))
+    assert "has already simulated 1.5 s (1500 steps)" in line and "the checkpoint is kept" in line
+    assert {f.name: f.read_bytes() for f in out.iterdir()} == before

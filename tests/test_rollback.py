@@ -1,4 +1,4 @@
-"""Rollback (taichimyxo/driver.py, docs/model.md "Numerics"): a chunk that breaks an invariant is redone from the
+"""Rollback (taichimyxo/run_loop.py, docs/model.md "Numerics"): a chunk that breaks an invariant is redone from the
 in-memory copy taken before it, with each scene step split into 2 (then 4, 8) steps; the scene's step resumes after.
 
 Forced breaches: two overlapping cells pushed apart at 20 ms, beyond the explicit stability limit (the checker's own
@@ -17,7 +17,7 @@ import sys
 import numpy as np
 
 from simtools import L0, cell
-from taichimyxo.driver import MAX_SPLIT, drive
+from taichimyxo.run_loop import MAX_SPLIT, drive
 from taichimyxo.writers import InvariantCheck, check_positions, read_checkpoint, write_checkpoint
 
 N = 8
@@ -66,10 +66,10 @@ def test_a_split_scene_step_advances_the_reversal_clocks_by_one(small_scene, mak
     clock0, period0 = rev.rev_clock.to_numpy(), rev.rev_period.to_numpy()
     n = 40
     assert np.all(clock0 + n < period0), "a reversal within the test's steps would hide the clock's count"
-    sim.run_split(n, 4)
+    sim.advance_split(n, 4)
     assert sim.step_count == n
     assert np.array_equal(rev.rev_clock.to_numpy(), clock0 + n)
-    sim.run(n)
+    sim.advance(n)
     assert np.array_equal(rev.rev_clock.to_numpy(), clock0 + 2 * n)
 
 

@@ -292,7 +292,7 @@ def test_slime_element_at_the_wrap(small_scene, make_sim, box):
     lead -= [lead[0, 0], 0.0]                                   # particle 0 (the rear, k_e = -1) exactly at x = 0
     follow = cell((box - 0.5 * (N - 1) * L0 - 0.6, 5.05), math.degrees(0.1), N, L0)
     sim = make_sim(sc, np.stack([lead, follow]), _ke(-1, -1))   # both move along +x
-    sim.run(1)
+    sim.advance(1)
     s = sim.model.slime.slime.to_numpy()
     assert np.abs(s[0]).sum() > 0                              # deposited into the first column
     mon = check_invariants(sim, 4000)
@@ -346,8 +346,8 @@ def test_random_small_configurations_stay_bounded(sim_cache, n, stiffness, k_c, 
     """2-6 cells placed at random without overlap on a 10 x 10 µm box (crowd) or 12 x 12 µm, any paper stiffness,
     either k_c and any guiding kind: 1000 steps at the default step keep every invariant. One Simulation per
     compile-time configuration; new positions are loaded with set_state."""
-    from taichimyxo.init import random_start
-    from taichimyxo.simulation import make_simulation
+    from taichimyxo.placement import random_start
+    from taichimyxo.simulation import Simulation
     box = 10.0 if crowd else 12.0
     sc = build_small_scene(n, box=(box, box), cell={"k_a_N_m": STIFFNESS[stiffness]},
                            collisions={"k_c_N_per_m": k_c}, guiding={"kind": guiding}, run={"seed": seed})
@@ -355,7 +355,7 @@ def test_random_small_configurations_stay_bounded(sim_cache, n, stiffness, k_c, 
     key = (n, box, stiffness, k_c, guiding)
     sim = sim_cache.get(key)
     if sim is None:
-        sim = sim_cache[key] = make_simulation(sc, positions=pos, engine_direction=ke)
+        sim = sim_cache[key] = Simulation.from_positions(sc, pos, ke)
     else:
         sim.set_state(pos, ke)
     check_invariants(sim, 1000)

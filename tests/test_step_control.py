@@ -1,7 +1,7 @@
 """The step-size controller, run.step_control = "error" (taichimyxo/integrators/step_control.py): the rule, a free
 cell at the longest step with its clock exact, a guiding pull's onset that shortens the steps, reversal clocks in scene
-steps, and the combinations refused at load. 1 and 2 threads (test_init.py) and --resume (test_interrupt.py) are tested
-with the other effects."""
+steps, and the combinations refused at load. 1 and 2 threads (test_threads.py) and --resume (test_interrupt.py)
+are tested with the other effects."""
 import math
 
 import numpy as np
@@ -51,7 +51,7 @@ def test_free_cell_runs_at_the_longest_step_on_the_scene_clock(make_sim):
     pos = cell((10.0, 10.0), 0.0)[None]
     sim = make_sim(sc, positions=pos, engine_direction=np.array([1]))
     n = 1501                                               # not a multiple of 3: the last step is cut to fit
-    sim.run(n)
+    sim.advance(n)
     st = sim.solver_stats()
     assert st["scene_steps"] == n and sim.step_count == n and sim.time == n * sc.dt
     assert st["steps_taken"] <= n // 3 + 4                  # two single steps, one double, then triples
@@ -67,10 +67,10 @@ def test_a_guided_head_takes_shorter_steps(make_sim):
     leader = cell((7.0, 8.0), 90.0)                        # head at the bottom, moving -y; tail end at y = 10.25
     follower = cell((7.0 + 0.8 + 2.25, 10.25), 0.0)        # head 0.8 µm right of the tail end (gap 0.3 > d_g)
     sim = make_sim(sc, positions=np.stack([leader, follower]), engine_direction=np.array([1, 1]))
-    sim.run(200)                                           # 0.03 µm closer: free
+    sim.advance(200)                                           # 0.03 µm closer: free
     st = sim.solver_stats()
     assert st["multiple"] == 3 and st["steps_taken"] <= 200 // 3 + 4
-    sim.run(1500)                                          # 0.2 µm more: inside d_g after about 0.8 s
+    sim.advance(1500)                                          # 0.2 µm more: inside d_g after about 0.8 s
     during = sim.solver_stats()["steps_taken"] - st["steps_taken"]
     assert sim.positions()[1, 0, 1] < 10.25 - 0.05         # pulled off its straight path toward the tail
     assert during > 1500 / 3 + 2                           # single steps at the jump, then growing back
@@ -87,7 +87,7 @@ def test_reversal_clocks_count_scene_steps(make_sim):
     clock0, period = int(rv.rev_clock[0]), int(rv.rev_period[0])
     assert period == 300
     n = 3000
-    sim.run(n)
+    sim.advance(n)
     assert sim.solver_stats()["mean_multiple"] > 2.5         # the controller did take long steps
     assert int(rv.rev_count[0]) == (clock0 + n) // period
     assert int(rv.rev_clock[0]) <= (clock0 + n) % period    # at most the cut of the last step behind

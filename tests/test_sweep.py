@@ -115,7 +115,7 @@ def test_bad_sweep_files_are_refused_in_one_line_before_anything_runs(tmp_path, 
 
 
 def test_a_missing_executor_is_one_line(tmp_path, capsys, monkeypatch):
-    from taichimyxo.sweep import driver
+    from taichimyxo.sweep import orchestrator as driver
     monkeypatch.setitem(driver.EXECUTORS, "slurm", "taichimyxo.sweep.no_such_executor")
     f = sweep_file(tmp_path, "guiding.kind = [\"none\"]")
     line = error_line(capsys, main(["sweep", str(f), "--executor", "slurm", "--out", str(tmp_path / "o")]))
@@ -208,7 +208,7 @@ def test_progress_counts_runs_and_estimates_the_time_left():
 # ------------------------------------------------------------------------------------------------ videos --jobs
 def test_videos_in_parallel_go_through_the_executor_and_s8_waits_for_s3s_trajectory(tmp_path, monkeypatch):
     from taichimyxo import videos
-    from taichimyxo.sweep import driver
+    from taichimyxo.sweep import orchestrator as driver
     waves = []
 
     class Fake:

@@ -4,7 +4,8 @@
 stored (non-guided, passive following, active following, adhesion, slime trails) and writes ``claims.md``,
 ``claims.csv``, ``claims.json`` and a plot per claim where a picture says it better (``claims.<name>.png``). A claim
 whose runs are missing names the kind of run it needs instead of a number. The command line is
-``python -m taichimyxo claims RUN.gsd [RUN.gsd ...] [--out DIR]``.
+``python -m taichimyxo claims RUN.gsd [RUN.gsd ...] [--out DIR]``. Each claim is a function registered in ``CLAIMS`` by
+``@claim(id)``; ``evaluate(runs)`` calls them in the order registered, which is the table's.
 
 The claims (Janulevicius et al. 2015) and how each is measured; "± SE" over frames is by batch means
 (stats.series_mean_se: blocks of sqrt(n) successive frames, so the correlation of successive frames widens it; NaN
@@ -53,6 +54,7 @@ import io
 import json
 import math
 import os
+from typing import Callable
 
 import numpy as np
 
@@ -72,12 +74,13 @@ from .claim_runs import (
 from .stats import series_mean_se
 from .stiffness import records_from_runs, stiffness_rows
 from .summary import json_clean
+from .tracking import size_regression
 
 
 def _describe(r) -> str:
     m = r["summary"]["meta"]
     t = m["time_range_min"]
-    return f"{r['label']} ({KINDS.get(r['kind'], (r['kind'],))[0]}, {m['n_cells']} cells, {t[0]:.0f}-{t[1]:.0f} min)"
+    return f"{r['label']} ({_kind_label(r)}, {m['n_cells']} cells, {t[0]:.0f}-{t[1]:.0f} min)"
 
 
 def _row(cid, claim, paper, runs, measured, status, values, plot=None):
@@ -95,16 +98,35 @@ def _speed_span_min(r) -> float:
     return float(t1 - max(t0, first))
 
 
-def evaluate(runs: list[dict]) -> list[dict]:
-    """The claims table (list of row dicts: id, claim, measured, paper, runs, status, values, plot)."""
-    from .tracking import size_regression
-    rows = []
-    label = lambda r: KINDS.get(r["kind"], (r["kind"],))[0]     # noqa: E731
+# The claims in table order: id -> function(runs, shared) returning its row, or its rows (a claim may give several).
+CLAIMS: dict[str, Callable[[list[dict], dict], dict | list[dict]]] = {}
 
-    # 1. free cells move at v_b
+
+def claim(cid: str):
+    """Register the decorated function as claim `cid`; the table lists the claims in the order they are registered."""
+    def register(fn):
+        if cid in CLAIMS:
+            raise ValueError(f"claim {cid!r} is registered twice")
+        CLAIMS[cid] = fn
+        return fn
+    return register
+
+
+def _kind_label(r) -> str:
+    return KINDS.get(r["kind"], (r["kind"],))[0]
+
+
+def _shared(runs: list[dict]) -> dict:
+    """What several claims use, computed once: free_speed, each run's free-cell speed / v_b (mean, SE, frames) by
+    id(run)."""
+    return dict(free_speed={id(r): free_speed(r) for r in runs})
+
+
+@claim("free_cell_speed")
+def free_cell_speed(runs, shared):
     vals, parts = {}, []
     for r in runs:
-        m, se, n = free_speed(r)
+        m, se, n = shared["free_speed"][id(r)]
         nf = int(np.nansum(r["summary"]["timeseries"]["n_free_cells"]))
         vals[r["label"]] = dict(mean_vb=m, se=se, n_frames=n, free_cell_frames=nf)
         parts.append(f"{r['label']}: {plus_minus(m, se)} v_b" if n else f"{r['label']}: no free cells")
@@ -112,28 +134,32 @@ def evaluate(runs: list[dict]) -> list[dict]:
     status = ("no free cells in these runs" if not ok else
               "consistent" if all(abs(v["mean_vb"] - 1) <= 0.05 + 2 * np.nan_to_num(v["se"]) for v in ok)
               else "not consistent")
-    rows.append(_row("free_cell_speed", "Free cells (touching no other cell) move at v_b",
-                     "a freely moving bacterium moves at its equilibrium speed v_b = 4 µm/min", runs,
-                     "; ".join(parts), status, vals))
+    return _row("free_cell_speed", "Free cells (touching no other cell) move at v_b",
+                "a freely moving bacterium moves at its equilibrium speed v_b = 4 µm/min", runs,
+                "; ".join(parts), status, vals)
 
-    # 2. 95th percentile of cell speed, guided vs non-guided
+
+@claim("speed_p95_guided_vs_non_guided")
+def speed_p95_guided_vs_non_guided(runs, shared):
     vals, parts = {}, []
     for r in runs:
         m, se, n = series_mean_se(np.asarray(r["summary"]["timeseries"]["speed_p95_um_per_min"], float) / r["v_b"])
         vals[r["label"]] = dict(kind=r["kind"], mean_vb=m, se=se, n_frames=n)
-        parts.append(f"{label(r)} {r['label']}: {plus_minus(m, se)} v_b")
+        parts.append(f"{_kind_label(r)} {r['label']}: {plus_minus(m, se)} v_b")
     g = [vals[r["label"]]["mean_vb"] for r in runs_of(runs, "active", "adhesion")]
     ng = [vals[r["label"]]["mean_vb"] for r in runs_of(runs, "non-guided")]
     if not ng:
         parts.append("non-guided: " + needs("non-guided"))
     status = (needs(*([] if g else ["active"]) + ([] if ng else ["non-guided"])) if not (g and ng) else
               "consistent" if min(g) > max(ng) else "not consistent")
-    rows.append(_row("speed_p95_guided_vs_non_guided", "95th-percentile cell speed: guided above non-guided",
-                     "non-guided cells are sped up by nothing but pushes (about v_b at most); with active following "
-                     "or adhesion cells at aggregate edges and in streams move faster than v_b (up to 4 v_b)",
-                     runs, "; ".join(parts), status, vals, plot="speed"))
+    return _row("speed_p95_guided_vs_non_guided", "95th-percentile cell speed: guided above non-guided",
+                "non-guided cells are sped up by nothing but pushes (about v_b at most); with active following "
+                "or adhesion cells at aggregate edges and in streams move faster than v_b (up to 4 v_b)",
+                runs, "; ".join(parts), status, vals, plot="speed")
 
-    # 3. fraction of cells in rotating aggregates
+
+@claim("fraction_in_aggregates")
+def fraction_in_aggregates(runs, shared):
     vals, parts = {}, []
     for r in runs:
         f = np.asarray(r["summary"]["timeseries"]["fraction_in_aggregates"], float)
@@ -142,29 +168,32 @@ def evaluate(runs: list[dict]) -> list[dict]:
         sd = float(f[q].std(ddof=1)) if len(f[q]) > 1 else float("nan")
         vals[r["label"]] = dict(kind=r["kind"], mean=float(f[q].mean()), sd=sd, final=float(f[-1]),
                                 from_min=float(t[q][0]), to_min=float(t[-1]))
-        parts.append(f"{label(r)} {r['label']}: {plus_minus(float(f[q].mean()), sd)} "
+        parts.append(f"{_kind_label(r)} {r['label']}: {plus_minus(float(f[q].mean()), sd)} "
                      f"(t = {t[q][0]:.0f}-{t[-1]:.0f} min)")
     hi = [vals[r["label"]]["mean"] for r in runs_of(runs, "active", "adhesion")]
     lo = [vals[r["label"]]["mean"] for r in runs_of(runs, "passive", "non-guided")]
     status = (needs(*([] if hi else ["active"]) + ([] if lo else ["passive"])) if not (hi and lo) else
               "consistent (ordering; the paper gives no number)" if min(hi) > max(lo) else "not consistent")
-    rows.append(_row("fraction_in_aggregates", "Fraction of cells in rotating aggregates (mean ± SD, last quarter)",
-                     "active following and adhesion form stable rotating circular aggregates (Fig 2D-E); passive "
-                     "following only small unstable circular structures (Fig 2C); non-guided cells clusters (Fig "
-                     "2B); no fraction is given (at 6 h)", runs, "; ".join(parts), status, vals, plot="fraction"))
+    return _row("fraction_in_aggregates", "Fraction of cells in rotating aggregates (mean ± SD, last quarter)",
+                "active following and adhesion form stable rotating circular aggregates (Fig 2D-E); passive "
+                "following only small unstable circular structures (Fig 2C); non-guided cells clusters (Fig "
+                "2B); no fraction is given (at 6 h)", runs, "; ".join(parts), status, vals, plot="fraction")
 
-    # 4. rigid rotation: the rigidity exponent of the speed-against-radius profile (aggregate_measure)
+
+@claim("rigid_rotation")
+def rigid_rotation(runs, shared):
+    """The rigidity exponent of the speed-against-radius profile (aggregate_measure)."""
     vals, parts, judged = {}, [], []
     for r in runs:
         al = [x for t in r["summary"]["tracks"] for x in t["series"].get("rigidity_exponent", []) if x is not None]
         if not al:
             if r["kind"] in ("active", "adhesion", "slime"):
-                parts.append(f"{label(r)} {r['label']}: no aggregate spanning radii by a factor of 2")
+                parts.append(f"{_kind_label(r)} {r['label']}: no aggregate spanning radii by a factor of 2")
             continue
         q = np.percentile(al, [25, 50, 75])
         vals[r["label"]] = dict(kind=r["kind"], median=float(q[1]), quartiles=[float(q[0]), float(q[2])], n=len(al),
                                 fraction_rigid=float(np.mean(np.asarray(al) >= RIGID_EXPONENT)))
-        parts.append(f"{label(r)} {r['label']}: median α {q[1]:.2f} (quartiles {q[0]:.2f}-{q[2]:.2f}), "
+        parts.append(f"{_kind_label(r)} {r['label']}: median α {q[1]:.2f} (quartiles {q[0]:.2f}-{q[2]:.2f}), "
                      f"{100 * vals[r['label']]['fraction_rigid']:.0f} % of {len(al)} aggregate-frames rigid")
         if r["kind"] in ("active", "adhesion"):
             judged += al
@@ -172,46 +201,66 @@ def evaluate(runs: list[dict]) -> list[dict]:
     status = (needs("active") if not sr else "not measurable here: no aggregate of these runs spans radii by a "
               "factor of 2 (a ring of cells, or a run too short to form larger aggregates)" if not judged else
               "consistent" if float(np.median(judged)) >= RIGID_EXPONENT else "not consistent")
-    rows.append(_row("rigid_rotation", "Aggregates rotate as rigid bodies (rigidity exponent α, speed ~ r^α over "
-                     f"an aggregate's particles; rigid when α >= {RIGID_EXPONENT:g}; 1 rigid, 0 every cell at one "
-                     "speed)",
-                     "stable rotating aggregates rotate as rigid bodies: cells do not slide laterally, cells in the "
-                     "centre move slower than at the edge (short-range guiding); with slime trails most cells move "
-                     "at v_b", runs, "; ".join(parts) or "no aggregates", status, vals, plot="rigid"))
+    return _row("rigid_rotation", "Aggregates rotate as rigid bodies (rigidity exponent α, speed ~ r^α over "
+                f"an aggregate's particles; rigid when α >= {RIGID_EXPONENT:g}; 1 rigid, 0 every cell at one "
+                "speed)",
+                "stable rotating aggregates rotate as rigid bodies: cells do not slide laterally, cells in the "
+                "centre move slower than at the edge (short-range guiding); with slime trails most cells move "
+                "at v_b", runs, "; ".join(parts) or "no aggregates", status, vals, plot="rigid")
 
-    # 5-7. edge speed / v_b
-    edge_paper = {
-        "active": "edge faster than v_b, at most 4 v_b = 16 µm/min (rigid-body model, F_max = 200 pN; S2 Text)",
-        "adhesion": "edge at (4/3) v_b = 5.3 µm/min (rigid-body model, S2 Text), faster than a free cell",
-        "slime": "most cells, the edge included, at about v_b (guiding turns cells, does not speed them up; "
-                 "rigid cells S16; flexible cells S17 form small short-lived aggregates)",
-    }
-    for kind in ("active", "adhesion", "slime"):
-        rs = runs_of(runs, kind)
-        ev = [t["mean_edge_speed_vb"] for r in rs for t in stable_tracks(r)]
-        fs = [free_speed(r)[0] for r in rs]
-        fs = float(np.nanmean(fs)) if rs and np.isfinite(fs).any() else float("nan")
-        m, se, n = mean_se(ev)
-        vals = dict(mean_vb=m, se=se, n_tracks=n, free_cell_speed_vb=fs, per_track=ev)
-        if not rs:
-            measured, status = needs(kind), needs(kind)
-        elif not n:
-            measured, status = "no aggregate seen in >= 3 frames", "no aggregates in these runs"
+
+EDGE_PAPER = {
+    "active": "edge faster than v_b, at most 4 v_b = 16 µm/min (rigid-body model, F_max = 200 pN; S2 Text)",
+    "adhesion": "edge at (4/3) v_b = 5.3 µm/min (rigid-body model, S2 Text), faster than a free cell",
+    "slime": "most cells, the edge included, at about v_b (guiding turns cells, does not speed them up; "
+             "rigid cells S16; flexible cells S17 form small short-lived aggregates)",
+}
+
+
+def _edge_speed(runs, shared, kind):
+    """The edge speed / v_b of the runs of one kind, beside their free cells' speed."""
+    rs = runs_of(runs, kind)
+    ev = [t["mean_edge_speed_vb"] for r in rs for t in stable_tracks(r)]
+    fs = [shared["free_speed"][id(r)][0] for r in rs]
+    fs = float(np.nanmean(fs)) if rs and np.isfinite(fs).any() else float("nan")
+    m, se, n = mean_se(ev)
+    vals = dict(mean_vb=m, se=se, n_tracks=n, free_cell_speed_vb=fs, per_track=ev)
+    if not rs:
+        measured, status = needs(kind), needs(kind)
+    elif not n:
+        measured, status = "no aggregate seen in >= 3 frames", "no aggregates in these runs"
+    else:
+        measured = (f"{plus_minus(m, se)} v_b ({plus_minus(m * rs[0]['v_b'], se * rs[0]['v_b'], '.1f')} µm/min), "
+                    f"SE over {n} tracks; free cells {fs:.2f} v_b")
+        s2 = 2 * np.nan_to_num(se)
+        if kind == "active":
+            good = m - s2 > fs and m <= 4 + s2
+        elif kind == "adhesion":
+            good = abs(m - 4 / 3) <= max(s2, 0.1 * 4 / 3) and m - s2 > fs
         else:
-            measured = (f"{plus_minus(m, se)} v_b ({plus_minus(m * rs[0]['v_b'], se * rs[0]['v_b'], '.1f')} µm/min), "
-                        f"SE over {n} tracks; free cells {fs:.2f} v_b")
-            s2 = 2 * np.nan_to_num(se)
-            if kind == "active":
-                good = m - s2 > fs and m <= 4 + s2
-            elif kind == "adhesion":
-                good = abs(m - 4 / 3) <= max(s2, 0.1 * 4 / 3) and m - s2 > fs
-            else:
-                good = abs(m - 1) <= max(s2, 0.1)
-            status = "consistent" if good else "not consistent"
-        rows.append(_row(f"edge_speed_{kind}", f"Edge speed / v_b, {KINDS[kind][0]}", edge_paper[kind], rs,
-                         measured, status, vals, plot="edge_speed"))
+            good = abs(m - 1) <= max(s2, 0.1)
+        status = "consistent" if good else "not consistent"
+    return _row(f"edge_speed_{kind}", f"Edge speed / v_b, {KINDS[kind][0]}", EDGE_PAPER[kind], rs,
+                measured, status, vals, plot="edge_speed")
 
-    # 8. edge speed vs aggregate size
+
+@claim("edge_speed_active")
+def edge_speed_active(runs, shared):
+    return _edge_speed(runs, shared, "active")
+
+
+@claim("edge_speed_adhesion")
+def edge_speed_adhesion(runs, shared):
+    return _edge_speed(runs, shared, "adhesion")
+
+
+@claim("edge_speed_slime")
+def edge_speed_slime(runs, shared):
+    return _edge_speed(runs, shared, "slime")
+
+
+@claim("edge_speed_vs_size")
+def edge_speed_vs_size(runs, shared):
     vals, parts, stats = {}, [], []
     for kind in ("active", "adhesion"):
         rs = runs_of(runs, kind)
@@ -234,11 +283,14 @@ def evaluate(runs: list[dict]) -> list[dict]:
     status = (needs("active") if not runs_of(runs, "active", "adhesion") else
               "too few tracks (>= 3 needed)" if not stats else
               "consistent" if all(stats) else "not consistent")
-    rows.append(_row("edge_speed_vs_size", "Edge speed vs aggregate radius (slope ± SE over tracks)",
-                     "edge speed appears not to depend on the aggregate size (so larger aggregates turn slower)",
-                     runs_of(runs, "active", "adhesion"), "; ".join(parts), status, vals, plot="edge_vs_radius"))
+    return _row("edge_speed_vs_size", "Edge speed vs aggregate radius (slope ± SE over tracks)",
+                "edge speed appears not to depend on the aggregate size (so larger aggregates turn slower)",
+                runs_of(runs, "active", "adhesion"), "; ".join(parts), status, vals, plot="edge_vs_radius")
 
-    # 9. lifetimes, passive vs active
+
+@claim("aggregate_lifetimes")
+def aggregate_lifetimes(runs, shared):
+    """Lifetimes of the aggregates' tracks, passive against active following and adhesion."""
     vals, parts = {}, []
     for r in runs:
         lt = r["summary"]["lifetimes"]
@@ -246,12 +298,12 @@ def evaluate(runs: list[dict]) -> list[dict]:
             "n_tracks", "median_lifetime_min", "max_lifetime_min", "n_long_lived",
             "fraction_aggregate_frames_long_lived", "events", "lifetimes_min", "lifetime_censored")})
         if lt["n_tracks"]:
-            parts.append(f"{label(r)} {r['label']}: {lt['n_tracks']} tracks, median {lt['median_lifetime_min']:.0f} "
-                         f"min, longest {lt['max_lifetime_min']:.0f} min, "
+            parts.append(f"{_kind_label(r)} {r['label']}: {lt['n_tracks']} tracks, median "
+                         f"{lt['median_lifetime_min']:.0f} min, longest {lt['max_lifetime_min']:.0f} min, "
                          f"{100 * lt['fraction_aggregate_frames_long_lived']:.0f} % of aggregate-frames in tracks "
                          f">= {lt['stable_lifetime_min']:g} min")
         else:
-            parts.append(f"{label(r)} {r['label']}: no aggregates")
+            parts.append(f"{_kind_label(r)} {r['label']}: no aggregates")
     fr = lambda rs: [vals[r["label"]]["fraction_aggregate_frames_long_lived"] or 0.0 for r in rs]  # noqa: E731
     pas, act = fr(runs_of(runs, "passive")), fr(runs_of(runs, "active", "adhesion"))
     stable_min = runs[0]["summary"]["parameters"]["stable_lifetime_min"] if runs else 10
@@ -262,13 +314,15 @@ def evaluate(runs: list[dict]) -> list[dict]:
               f"not measurable here: a run with {min(span):.1f} min of measured speeds cannot show a lifetime of "
               f"{stable_min:g} min (needs longer runs)" if min(span) < stable_min else
               "consistent" if max(pas) < min(act) else "not consistent")
-    rows.append(_row("aggregate_lifetimes", f"Aggregate lifetimes (tracks by shared cells; long-lived: >= "
-                     f"{stable_min:g} min)",
-                     "passive following gives only small unstable circular structures that quickly dissipate; active "
-                     "following and adhesion give stable rotating aggregates", runs, "; ".join(parts), status, vals,
-                     plot="lifetimes"))
+    return _row("aggregate_lifetimes", f"Aggregate lifetimes (tracks by shared cells; long-lived: >= "
+                f"{stable_min:g} min)",
+                "passive following gives only small unstable circular structures that quickly dissipate; active "
+                "following and adhesion give stable rotating aggregates", runs, "; ".join(parts), status, vals,
+                plot="lifetimes")
 
-    # 10. strain inside vs outside aggregates
+
+@claim("strain_inside_vs_outside")
+def strain_inside_vs_outside(runs, shared):
     vals, parts = {}, []
     for r in runs:
         ts = r["summary"]["timeseries"]
@@ -281,7 +335,7 @@ def evaluate(runs: list[dict]) -> list[dict]:
         sp = r["summary"].get("strain_profile") or {}
         vals[r["label"]] = dict(kind=r["kind"], ratio=m, se=se, n_frames=n, inner_over_outer=sp.get("inner_over_outer"))
         io_ = sp.get("inner_over_outer")
-        parts.append(f"{label(r)} {r['label']}: inside / outside {plus_minus(m, se)} over {n} frames" +
+        parts.append(f"{_kind_label(r)} {r['label']}: inside / outside {plus_minus(m, se)} over {n} frames" +
                      (f"; inner (r < R/2) / outer {io_:.2f}" if io_ is not None and math.isfinite(io_) else ""))
     if not vals:
         measured = "not in these runs (no strain logged)"
@@ -291,14 +345,26 @@ def evaluate(runs: list[dict]) -> list[dict]:
         ok = [v for v in vals.values() if v["n_frames"]]
         status = ("no aggregates in the runs with strain" if not ok else
                   "consistent" if all(v["ratio"] - 2 * np.nan_to_num(v["se"]) > 1 for v in ok) else "not consistent")
-    rows.append(_row("strain_inside_vs_outside", "Strain energy inside vs outside aggregates",
-                     "overlaps (strain energy) are higher towards the centre of rotating aggregates, and stay high "
-                     "there (Fig 2F, S8 Video)", [r for r in runs if r["label"] in vals], measured, status, vals,
-                     plot="strain" if vals else None))
+    return _row("strain_inside_vs_outside", "Strain energy inside vs outside aggregates",
+                "overlaps (strain energy) are higher towards the centre of rotating aggregates, and stay high "
+                "there (Fig 2F, S8 Video)", [r for r in runs if r["label"] in vals], measured, status, vals,
+                plot="strain" if vals else None)
 
-    # 11-14. the paper's statements on bending stiffness (stiffness.py), over the runs' k_a
-    rows += [dict(r, runs="; ".join(_describe(x) for x in runs if x["kind"] in ("non-guided", "active")) or "none",
-                  plot=None) for r in stiffness_rows(records_from_runs(runs))]
+
+@claim("stiffness")
+def stiffness(runs, shared):
+    """The paper's four statements on bending stiffness (stiffness.py), over the runs' k_a: four rows."""
+    return [dict(r, runs="; ".join(_describe(x) for x in runs if x["kind"] in ("non-guided", "active")) or "none",
+                 plot=None) for r in stiffness_rows(records_from_runs(runs))]
+
+
+def evaluate(runs: list[dict]) -> list[dict]:
+    """The claims table (list of row dicts: id, claim, measured, paper, runs, status, values, plot)."""
+    shared = _shared(runs)
+    rows = []
+    for fn in CLAIMS.values():
+        out = fn(runs, shared)
+        rows += out if isinstance(out, list) else [out]
     return rows
 
 

@@ -89,7 +89,7 @@ def cmd_figures(args, options: dict) -> int:
 
 
 def print_dry_run(plans: list, jobs: int) -> None:
-    from ..progress import duration
+    from ..status_line import duration
     from .plan import bench_rates, makespan, run_seconds
     rates = bench_rates()
     total, all_secs = 0.0, []
@@ -121,7 +121,7 @@ def run_all(plans: list, executor: str, jobs: int | None, options: dict) -> int:
     """Every figure's unfinished runs through one executor; then each sweep's table. 0, or the exit status."""
     from ..scene_run import check_output_dir
     from ..sweep.collect import collect
-    from ..sweep.driver import executor_module
+    from ..sweep.orchestrator import executor_module
     from ..sweep.progress import SweepProgress
     from ..sweep.rundir import prepare
     from ..sweep.spec import load_sweep

@@ -116,7 +116,7 @@ def plan_figure(figure: Figure, scale_name: str, out: Path, seeds: int | None = 
 
 
 def write_sweep_file(runs: FigureRuns) -> Path:
-    """OUT/NAME/sweep.toml, the sweep whose runs the figure shows (the driver reads it back from there)."""
+    """OUT/NAME/sweep.toml, the sweep whose runs the figure shows (the orchestrator reads it back from there)."""
     runs.root.mkdir(parents=True, exist_ok=True)
     path = runs.root / "sweep.toml"
     write_text_atomic(path, runs.text)

@@ -12,14 +12,14 @@ import taichi as ti
 
 @ti.data_oriented
 class BandedCells:
-    def __init__(self, n_cells: int, N: int, dtype, fb):
+    def __init__(self, n_cells: int, N: int, dtype, builder):
         self.N, self.n2 = N, 2 * N
         self.BW = min(6, self.n2)                 # lower band incl. the diagonal: bending couples k and k+2
         self.dtype = dtype
         self.Lf = ti.field(dtype)
-        fb.dense(ti.ij, (n_cells * self.n2, self.BW + 1)).place(self.Lf)
+        builder.dense(ti.ij, (n_cells * self.n2, self.BW + 1)).place(self.Lf)
         self.tmp = ti.field(dtype)
-        fb.dense(ti.i, n_cells * self.n2).place(self.tmp)
+        builder.dense(ti.i, n_cells * self.n2).place(self.tmp)
 
     @ti.func
     def clear(self, c):

@@ -6,7 +6,9 @@ chosen by the controller of step_control.py, whose estimate the kernel computes 
 
 import taichi as ti
 
+from ..neighbours import FLAG_MOVED
 from ..state import perp
+from . import step_code
 from .step_control import StepControl
 
 
@@ -14,13 +16,13 @@ from .step_control import StepControl
 class Explicit:
     name = "explicit"
 
-    def __init__(self, scene, state, model, neighbours, fb):
+    def __init__(self, scene, state, model, neighbours, builder):
         self.state, self.model, self.nl = state, model, neighbours
         self.N = scene.N
         self.zeta_t, self.zeta_n = scene.zeta_t, scene.zeta_n
         self.mass = scene.mass                  # pN s^2 / µm per particle; 0: overdamped
-        self.v = state.vec(fb, state.n_p, state.fdt) if self.mass > 0 else None
-        self.control = StepControl(scene, state, fb) if scene.step_control == "error" else None
+        self.v = state.vec(builder, state.n_p, state.fdt) if self.mass > 0 else None
+        self.control = StepControl(scene, state, builder) if scene.step_control == "error" else None
         self.controlled = self.control is not None
 
     @ti.kernel
@@ -55,18 +57,18 @@ class Explicit:
             if ti.static(self.controlled):
                 self.control.cell_dv[c] = dv
             m.after_move(c, moved, dt)
-        if ti.static(m.has_slime):
+        if ti.static(m.has_last_loop):
             ti.loop_config(**st.loops.items)
             for c in range(st.n_cells):
-                m.deposit(c, dt)
-        code = 0
+                m.last_loop(c, dt)
+        ratio = 0
         if ti.static(self.controlled):
-            code = 2 * self.control.ratio_code(dt)
-        return self.nl.flags[1] + code
+            ratio = self.control.ratio_code(dt)
+        return step_code(self.nl.flags[FLAG_MOVED], ratio)
 
     def step(self, dt: float) -> int:
-        """One step of dt s; returns the rebuild flag, plus twice the controller's quantised error ratio when
-        run.step_control = "error" (StepControl.took decodes it)."""
+        """One step of dt s; returns its step_code (integrators/__init__.py): the rebuild flag and, with
+        run.step_control = "error", the controller's quantised error ratio (StepControl.took decodes it)."""
         return self._step(dt)
 
     def reset(self, restored: bool = False) -> None:

@@ -53,6 +53,7 @@ import math
 import taichi as ti
 
 from ..launch import scan_block
+from ..neighbours import FLAG_MOVED
 from .banded import BandedCells
 
 CONTACT_MODES = ("coupled", "diagonal", "explicit")
@@ -68,7 +69,7 @@ class ImexError(ValueError):
 class Imex:
     name = "imex"
 
-    def __init__(self, scene, state, model, neighbours, fb, contacts: str = "coupled", tol: float = DEFAULT_TOL,
+    def __init__(self, scene, state, model, neighbours, builder, contacts: str = "coupled", tol: float = DEFAULT_TOL,
                  max_iter: int = DEFAULT_MAX_ITER, iters_per_launch: int = 2):
         if scene.mass > 0:
             raise ImexError("run.integrator = 'imex' is overdamped only; set run.mass_pg = 0")
@@ -82,30 +83,33 @@ class Imex:
         C, P = state.n_cells, state.n_p
         self.nblk = state.loops.cell_blocks(C)  # partial sums per block of cells (launch.py: CPU <= 64, GPU one a cell)
         self.bs = (C + self.nblk - 1) // self.nblk
-        self.band = BandedCells(C, scene.N, state.fdt, fb)
+        self.band = BandedCells(C, scene.N, state.fdt, builder)
+        # explicit contacts: terms that couple cells (contacts) stay out of the matrix
+        self.stiff_terms = [u for u in model.stiff_terms
+                            if contacts != "explicit" or u not in model.coupling_terms]
 
         def dof(n):
-            return state.scalar(fb, n, state.fdt)
+            return state.scalar(builder, n, state.fdt)
 
         self.vel = dof(2 * P)                     # solution (velocity), kept as the next step's first guess
         self.rhs = dof(2 * P)                     # F(x_n)
-        self.tan = state.vec(fb, P, state.fdt)    # tangents and chain offsets of x_n, for the assembly
-        self.xrel = state.vec(fb, P, state.fdt)
+        self.tan = state.vec(builder, P, state.fdt)    # tangents and chain offsets of x_n, for the assembly
+        self.xrel = state.vec(builder, P, state.fdt)
         self.coupled = contacts == "coupled"
         if self.coupled:
             self.cg_r, self.cg_u, self.cg_w, self.cg_p, self.cg_s = (dof(2 * P) for _ in range(5))
             self.vprev = dof(2 * P)               # last step's velocities: the first guess
-            self.active = state.scalar(fb, C, ti.i32)     # cell takes part in the CG (it has contacts)
+            self.active = state.scalar(builder, C, ti.i32)     # cell takes part in the CG (it has contacts)
             self.part = ti.field(ti.f64)
-            fb.dense(ti.ij, (self.nblk, 3)).place(self.part)
+            builder.dense(ti.ij, (self.nblk, 3)).place(self.part)
             if state.loops.gpu:                   # the two-level reduction: sums of groups of ~sqrt(nblk) partials
                 self.grp = scan_block(self.nblk)
                 self.ngrp = (self.nblk + self.grp - 1) // self.grp
                 self.part2 = ti.field(ti.f64)
-                fb.dense(ti.ij, (self.ngrp, 3)).place(self.part2)
+                builder.dense(ti.ij, (self.ngrp, 3)).place(self.part2)
         self.cgs = ti.field(ti.f64)               # 0 gamma, 1 delta, 2 gamma_b, 3 alpha, 4 beta
         self.cgi = ti.field(ti.i32)               # 0 state (0 iterating, 1 converged, 2 step done), 1 iterations
-        fb.dense(ti.i, 8).place(self.cgs, self.cgi)   # this step, 2 total iterations, 3 steps
+        builder.dense(ti.i, 8).place(self.cgs, self.cgi)   # this step, 2 total iterations, 3 steps
 
     def reset(self, restored: bool = False) -> None:
         """Forget the previous step's velocities (the state was replaced, or restored from a checkpoint, which does
@@ -134,26 +138,24 @@ class Imex:
     # ------------------------------------------------------------------ per cell
     @ti.func
     def _factor(self, c, dt):
-        """Assemble Z + dt K for cell c (drag; springs, bending and the cell's own share of contacts, each from its
-        term) from tan / xrel, and factorise it."""
-        m = self.model
+        """Assemble Z + dt K for cell c (drag; each stiff term's block: springs, bending and the cell's own share of
+        contacts, unless contacts stay explicit) from tan / xrel, and factorise it."""
         band = self.band
         I2 = ti.Matrix.identity(self.state.fdt, 2)
         band.clear(c)
         for k in range(self.N):
             t = self.tan[c * self.N + k]
             band.add_diag(c, k, self.zeta_n * I2 + (self.zeta_t - self.zeta_n) * t.outer_product(t))
-        m.springs.add_stiffness(band, c, self.xrel, dt)
-        m.bending.add_stiffness(band, c, self.xrel, dt)
-        if ti.static(self.contacts != "explicit"):
-            m.contacts.add_stiffness(band, c, dt)
+        for u in ti.static(self.stiff_terms):
+            u.add_stiffness(band, c, self.xrel, dt)
         band.factor(c)
 
     @ti.func
     def _apply(self, c, y: ti.template(), out: ti.template(), dt):
-        """out = A y on cell c's rows: the cell's own block M y plus the contact coupling to other segments."""
+        """out = A y on cell c's rows: the cell's own block M y plus the coupling to other cells (contacts)."""
         self.band.multiply(c, y, out)
-        self.model.contacts.add_coupling(c, y, out, dt)
+        for u in ti.static(self.model.coupling_terms):
+            u.add_coupling(c, y, out, dt)
 
     @ti.func
     def _load_cell(self, c):
@@ -182,13 +184,13 @@ class Imex:
         self.model.after_move(c, moved, dt)
 
     @ti.func
-    def _deposit_pass(self, gated: ti.template(), dt):
+    def _last_loop(self, gated: ti.template(), dt):
         m = self.model
-        if ti.static(m.has_slime):
+        if ti.static(m.has_last_loop):
             ti.loop_config(**self.state.loops.items)
             for c in range(self.state.n_cells):
                 if not gated or self.cgi[0] == 1:
-                    m.deposit(c, dt)
+                    m.last_loop(c, dt)
 
     # ------------------------------------------------------------------ kernels
     @ti.kernel
@@ -206,7 +208,7 @@ class Imex:
                 self._factor(c, dtf)
                 self.band.solve(c, self.rhs, self.vel)
                 self._advance_cell(c, dt)
-            self._deposit_pass(False, dt)
+            self._last_loop(False, dt)
             ti.loop_config(**self.state.loops.one_thread)
             for _ in range(1):
                 self.cgi[3] += 1
@@ -363,7 +365,7 @@ class Imex:
                 base = c * self.n2
                 for i in range(self.n2):
                     self.vprev[base + i] = self.vel[base + i]
-        self._deposit_pass(True, dt)
+        self._last_loop(True, dt)
         ti.loop_config(**self.state.loops.one_thread)
         for _ in range(1):
             if self.cgi[0] == 1:
@@ -377,8 +379,8 @@ class Imex:
         self._finish(dt)
 
     def step(self, dt: float) -> int:
-        """One linearly implicit step (module docstring). Returns the neighbour-list flag (a particle moved past half
-        the skin), as the explicit step does."""
+        """One linearly implicit step (module docstring). Returns its step code (integrators/__init__.py): with no
+        step controller, the neighbour-list flag alone (a particle moved past half the skin)."""
         self._imex_begin(dt)
         if self.coupled:
             for _ in range(math.ceil(self.max_iter / self.iters_per_launch) + 1):
@@ -387,4 +389,4 @@ class Imex:
                     break
             else:
                 self._imex_finish(dt)
-        return self.nl.flags[1]
+        return self.nl.flags[FLAG_MOVED]

@@ -26,6 +26,8 @@ import math
 
 import taichi as ti
 
+from . import error_ratio_code, needs_rebuild
+
 # the quantum of the returned error ratio, and its cap (so that flag + 2 q fits an i32)
 RATIO_SCALE = 1000
 RATIO_CAP = 1.0e5
@@ -33,13 +35,13 @@ RATIO_CAP = 1.0e5
 
 @ti.data_oriented
 class StepControl:
-    def __init__(self, scene, state, fb):
+    def __init__(self, scene, state, builder):
         self.tol = scene.step_tolerance_um
         self.n_cells = state.n_cells
         self.max_multiple = scene.step_max_multiple
-        self.v_prev = state.vec(fb, state.n_p, state.fdt)       # each particle's velocity in the last step
-        self.cell_dv = state.scalar(fb, state.n_cells, ti.f32)  # per cell: max |v_n - v_n-1| this step
-        self.saved = state.scalar(fb, 3, ti.i32)                # multiple, steps taken, scene steps: checkpoints
+        self.v_prev = state.vec(builder, state.n_p, state.fdt)       # each particle's velocity in the last step
+        self.cell_dv = state.scalar(builder, state.n_cells, ti.f32)  # per cell: max |v_n - v_n-1| this step
+        self.saved = state.scalar(builder, 3, ti.i32)                # multiple, steps taken, scene steps: checkpoints
         self.multiple = 1
         self.steps_taken = 0
         self.ticks = 0
@@ -69,15 +71,15 @@ class StepControl:
         return min(self.multiple, left)
 
     def took(self, code: int, m: int) -> int:
-        """After a step of m scene steps whose kernel returned `code` (rebuild flag + 2 * quantised e / tol):
-        update the multiple (unless the step was cut to fit a chunk) and return the rebuild flag."""
+        """After a step of m scene steps whose kernel returned `code` (integrators.step_code): update the multiple
+        (unless the step was cut to fit a chunk) and return the rebuild flag."""
         self.steps_taken += 1
         self.ticks += m
         if m == self.multiple:
-            ratio = (code >> 1) / RATIO_SCALE
+            ratio = error_ratio_code(code) / RATIO_SCALE
             grow = self.max_multiple if ratio <= 0 else int(m / math.sqrt(ratio))
             self.multiple = max(1, min(grow, m + 1, self.max_multiple))
-        return code & 1
+        return needs_rebuild(code)
 
     def start(self) -> None:
         """A new state: no velocity history, so the first step is a single scene step (its estimate compares with

@@ -36,10 +36,10 @@ run and OUT/sweep.KEY.png the outcomes against each swept key (taichimyxo.sweep.
 
 Every point is resolved and validated before any run starts (an unknown key, an empty list, a value out of range at
 any point: one line naming the key and the point). Parts: spec (the file, the points), rundir (a run's folder),
-runner (one run), local (the local executor), progress (the status line), collect (the table and plots), driver
+runner (one run), local (the local executor), progress (the status line), collect (the table and plots), orchestrator
 (run_sweep and the executors)."""
 from .collect import OUTCOMES, collect, outcomes
-from .driver import EXECUTORS, executor_module, plan, run_sweep
+from .orchestrator import EXECUTORS, executor_module, plan, run_sweep
 from .runner import run_point
 from .spec import Point, Sweep, SweepError, load_sweep
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import time
 
-from ..progress import StatusLine, duration
+from ..status_line import StatusLine, duration
 
 
 class SweepProgress:

@@ -6,7 +6,7 @@ How a time limit becomes a resumed run:
 1. the job is submitted with ``--signal=USR2@signal_delay_s``: slurmctld sends SIGUSR2 to the job's step at most
    signal_delay_s + 30 s before the time limit (it checks time limits every 30 s) and SIGTERM at the limit;
 2. :class:`TimeLimitStop` turns that SIGUSR2 into the stop the simulation knows: once the run's driver listens
-   (taichimyxo.driver.Interrupt, also when the signal came before the simulation started), it sends the process one
+   (taichimyxo.run_loop.Interrupt, also when the signal came before the simulation started), it sends the process one
    SIGTERM; the driver finishes its chunk, closes the trajectory and writes the checkpoint (what Ctrl-C does);
 3. run_point returns "interrupted", and the handler submitit installed for SIGUSR2 runs: ``checkpoint()`` (submitit's
    Checkpointable: the same call again, which resumes from the checkpoint on disk), ``scontrol requeue``, exit. The
@@ -34,7 +34,7 @@ from pathlib import Path
 from submitit.helpers import Checkpointable
 
 from ..backend import reset
-from ..driver import Interrupt
+from ..run_loop import Interrupt
 from .rundir import LOG_FILE
 from .runner import run_point
 

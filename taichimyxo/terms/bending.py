@@ -7,6 +7,7 @@ import numpy as np
 import taichi as ti
 
 from ..state import perp
+from .base import Term
 
 
 @ti.func
@@ -46,7 +47,7 @@ def angle(y, x, fast: ti.template()):
 
 
 @ti.data_oriented
-class Bending:
+class Bending(Term):
     name = "bending"
 
     def __init__(self, scene):

@@ -32,16 +32,17 @@ import taichi as ti
 
 from ..geometry import contact_energy as energy  # noqa: F401  (the numpy reference energy, re-exported)
 from ..state import closest_points, perp
+from .base import Term
 
 
 @ti.data_oriented
-class Contacts:
+class Contacts(Term):
     name = "contacts"
     CONTACT_WEIGHT = 0.25
     POLE_WEIGHT = 0.5
     MAX_CONTACTS = 16     # recorded contacts per segment (implicit step); more stay in the force, not in K
 
-    def __init__(self, scene, state, neighbours, fb, record: bool = False):
+    def __init__(self, scene, state, neighbours, builder, record: bool = False):
         self.state, self.nl = state, neighbours
         self.N, self.W, self.k_c = scene.N, scene.width, scene.k_c
         S = state.n_s
@@ -50,19 +51,19 @@ class Contacts:
             # each pair once: the lower segment s of a listed pair (s, t) evaluates both sides into its slot of s's
             # row, (forces on s's two particles, forces on t's two); both segments gather them in list order
             self.pair_f = ti.Vector.field(8, dtype=state.fdt)
-            fb.dense(ti.ij, (S, neighbours.max_nbrs)).place(self.pair_f)
+            builder.dense(ti.ij, (S, neighbours.max_nbrs)).place(self.pair_f)
             self.fa = self.fb = None
         else:
             # the implicit step records each segment's view of its contacts, so each segment gathers its own
             self.pair_f = None
-            self.fa = state.vec(fb, S, state.fdt)    # contact force on a segment's first particle
-            self.fb = state.vec(fb, S, state.fdt)    # ... and on its second particle
+            self.fa = state.vec(builder, S, state.fdt)    # contact force on a segment's first particle
+            self.fb = state.vec(builder, S, state.fdt)    # ... and on its second particle
             # each segment's view of its contacts, for the Jacobian: (P on s, Q on t, n_x, n_y), n from t to s
-            self.ct_n = state.scalar(fb, S, ti.i32)
+            self.ct_n = state.scalar(builder, S, ti.i32)
             self.ct_t = ti.field(ti.i32)
             self.ct_w = ti.Vector.field(4, dtype=state.fdt)
-            fb.dense(ti.ij, (S, self.MAX_CONTACTS)).place(self.ct_t, self.ct_w)
-            self.overflow = state.scalar(fb, 1, ti.i32)
+            builder.dense(ti.ij, (S, self.MAX_CONTACTS)).place(self.ct_t, self.ct_w)
+            self.overflow = state.scalar(builder, 1, ti.i32)
         if not record:
             self.ct_n = self.ct_t = self.ct_w = self.overflow = None
 
@@ -356,10 +357,10 @@ class Contacts:
         import numpy as np
         st = self.state
         if getattr(self, "_out", None) is None:
-            fb = ti.FieldsBuilder()
+            builder = ti.FieldsBuilder()
             out = [ti.Vector.field(2, dtype=ti.f64) for _ in range(2)]
-            fb.dense(ti.i, st.n_s).place(*out)
-            self._out = (*out, fb.finalize())
+            builder.dense(ti.i, st.n_s).place(*out)
+            self._out = (*out, builder.finalize())
         self._segment_forces_to(self._out[0], self._out[1])
         sh = (st.n_cells, st.N - 1, 2)
         res = np.zeros((st.n_cells, st.N, 2))
@@ -374,9 +375,9 @@ class Contacts:
 
     # ------------------------------------------------------------------ stiffness, for the linearly implicit step
     @ti.func
-    def add_stiffness(self, band: ti.template(), c, dt):
+    def add_stiffness(self, band: ti.template(), c, xrel: ti.template(), dt):
         """Cell c's own share of dt k_c J^T gn gn^T J for each recorded contact (lever arms held fixed; the
-        tangential geometric term is dropped)."""
+        tangential geometric term is dropped). xrel is not needed: the lever arms were recorded with the forces."""
         N = ti.static(self.N)
         kc = dt * self.k_c
         for k in range(N - 1):

@@ -5,9 +5,11 @@ engine_direction k_e = ±1 (State.ke): +1 when particle 0 is the head."""
 
 import taichi as ti
 
+from .base import Term
+
 
 @ti.data_oriented
-class Engine:
+class Engine(Term):
     name = "engine"
 
     def __init__(self, scene, state):

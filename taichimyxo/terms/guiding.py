@@ -12,13 +12,14 @@ g_head (any guiding), g_tail (adhesion), interacting (suppression).
 import taichi as ti
 
 from ..state import closest_points, perp  # noqa: F401  (closest_points: tested here)
+from .base import Term
 
 
 @ti.data_oriented
-class HeadToTail:
-    name = "guiding"
+class HeadToTail(Term):
+    name = "head_to_tail"
 
-    def __init__(self, scene, state, neighbours, fb):
+    def __init__(self, scene, state, neighbours, builder):
         self.state, self.nl = state, neighbours
         self.kind = scene.guiding                         # none | passive | active | adhesion
         self.suppression = scene.suppression
@@ -27,12 +28,16 @@ class HeadToTail:
         self.particles = scene.guiding_by_particles
         self.guide_self = scene.guiding_self
         C = state.n_cells
-        self.g_head = state.vec(fb, C, state.fdt) if self.kind != "none" else None
-        self.g_tail = state.vec(fb, C, state.fdt) if self.kind == "adhesion" else None
+        self.g_head = state.vec(builder, C, state.fdt) if self.kind != "none" else None
+        self.g_tail = state.vec(builder, C, state.fdt) if self.kind == "adhesion" else None
         # per cell, one flag per end (head and tail segments write their own: no atomics, no clearing pass)
-        self.interacting = state.vec(fb, C, ti.i32) if self.suppression else None
+        self.interacting = state.vec(builder, C, ti.i32) if self.suppression else None
         # 1 + the cell whose tail this cell's head follows (nearest, gap below d_g), 0: none; read by the event log
-        self.leader = state.scalar(fb, C, ti.i32)
+        self.leader = state.scalar(builder, C, ti.i32)
+
+    def hooks(self) -> set:
+        # with suppression alone the head-to-tail pass only flags interactions: no force on the cell
+        return super().hooks() - ({"add_cell_forces"} if self.kind == "none" else set())
 
     @ti.func
     def pair(self, follower_seg, leader_seg):

@@ -12,13 +12,16 @@ import math
 import taichi as ti
 
 from ..rng import STREAM_REVERSAL, uniform_ti
+from .base import Term
 
 
 @ti.data_oriented
-class Reversals:
+class Reversals(Term):
     name = "reversals"
+    after_last_loop = True      # the reversal follows the slime write of the same step
+    ADDED_LATER = ("rev_suppressed",)
 
-    def __init__(self, scene, state, fb, head_tail=None):
+    def __init__(self, scene, state, builder, head_tail=None):
         self.state = state
         self.seed = scene.seed
         T = scene.reversal_period_s / scene.dt
@@ -29,11 +32,11 @@ class Reversals:
         self.head_tail = head_tail if scene.suppression else None
         self.suppressed = self.head_tail is not None
         C = state.n_cells
-        self.rev_clock = state.scalar(fb, C, ti.i32)      # steps since the last reversal
-        self.rev_period = state.scalar(fb, C, ti.i32)     # this cycle's period, steps
-        self.rev_count = state.scalar(fb, C, ti.i32)      # reversals so far (counter of the random stream)
-        self.clock_held = state.scalar(fb, 1, ti.i32)     # 1: this step is a part of a split scene step
-        self.rev_suppressed = state.scalar(fb, C, ti.i32)  # reversals skipped by suppression so far (event log)
+        self.rev_clock = state.scalar(builder, C, ti.i32)      # steps since the last reversal
+        self.rev_period = state.scalar(builder, C, ti.i32)     # this cycle's period, steps
+        self.rev_count = state.scalar(builder, C, ti.i32)      # reversals so far (counter of the random stream)
+        self.clock_held = state.scalar(builder, 1, ti.i32)     # 1: this step is a part of a split scene step
+        self.rev_suppressed = state.scalar(builder, C, ti.i32)  # reversals skipped by suppression so far (event log)
 
     @ti.func
     def draw_period(self, c, count):
@@ -55,7 +58,7 @@ class Reversals:
             self.rev_count[c] = 0
 
     @ti.func
-    def advance(self, c, dt):
+    def after_move(self, c, dt):
         """Advance cell c's clock by a step of dt s; reverse when it reaches the period, unless suppressed."""
         st = self.state
         if self.clock_held[0] == 0:
@@ -73,6 +76,9 @@ class Reversals:
                 st.ke[c] = -st.ke[c]
                 self.rev_count[c] += 1
                 self.rev_period[c] = self.draw_period(c, self.rev_count[c])
+
+    def checkpoint_fields(self) -> dict:
+        return {n: getattr(self, n) for n in ("rev_clock", "rev_period", "rev_count", "rev_suppressed")}
 
     def hold_clock(self, held: bool) -> None:
         """Hold the clocks during the coming steps (parts of one split scene step) or let them count again."""

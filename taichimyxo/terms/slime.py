@@ -10,13 +10,14 @@ scene uses slime.
 import taichi as ti
 
 from ..state import perp
+from .base import Term
 
 
 @ti.data_oriented
-class Slime:
+class Slime(Term):
     name = "slime"
 
-    def __init__(self, scene, state, fb):
+    def __init__(self, scene, state, builder):
         self.state = state
         self.N = scene.N
         self.dx, self.f_max = scene.slime_grid, scene.slime_f_max
@@ -24,7 +25,10 @@ class Slime:
         self.sgy = max(1, int(round(state.Ly / self.dx)))
         self.slime = ti.Vector.field(2, dtype=ti.f32)      # trail direction per element (0: unmarked)
         self.slime_claim = ti.field(ti.i32)
-        fb.dense(ti.ij, (self.sgx, self.sgy)).place(self.slime, self.slime_claim)
+        builder.dense(ti.ij, (self.sgx, self.sgy)).place(self.slime, self.slime_claim)
+
+    def checkpoint_fields(self) -> dict:
+        return {"slime": self.slime}
 
     @ti.func
     def element(self, x):
@@ -64,12 +68,14 @@ class Slime:
         return ix, iy, t
 
     @ti.func
-    def claim(self, c):
+    def after_move(self, c, dt):
+        """Claim the element under cell c's rear particle (the highest cell index wins, last_loop writes)."""
         ix, iy, _ = self._rear(c)
         ti.atomic_max(self.slime_claim[ix, iy], c + 1)
 
     @ti.func
-    def write(self, c):
+    def last_loop(self, c, dt):
+        """Write cell c's forward direction into the element it won."""
         ix, iy, t = self._rear(c)
         if self.slime_claim[ix, iy] == c + 1:
             self.slime[ix, iy] = t

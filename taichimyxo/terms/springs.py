@@ -6,9 +6,11 @@ for the finite-difference tests) and its stiffness block for the linearly implic
 import numpy as np
 import taichi as ti
 
+from .base import Term
+
 
 @ti.data_oriented
-class Springs:
+class Springs(Term):
     name = "springs"
 
     def __init__(self, scene):

@@ -7,16 +7,18 @@ in scenes that log strain (output.strain)."""
 import numpy as np
 import taichi as ti
 
+from .base import Term
+
 
 @ti.data_oriented
-class Strain:
+class Strain(Term):
     name = "strain"
 
-    def __init__(self, contacts, fb):
+    def __init__(self, contacts, builder):
         self.contacts = contacts
         st = contacts.state
         self.N, self.n_cells, self.n_s, self.loops = st.N, st.n_cells, st.n_s, st.loops
-        self.strain_seg = st.scalar(fb, st.n_s, ti.f64)
+        self.strain_seg = st.scalar(builder, st.n_s, ti.f64)
 
     @ti.kernel
     def _compute(self):

@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import signal
 import time
-import weakref
 
 from .triggers import is_step_trigger
 
@@ -109,10 +108,36 @@ def steps_for(sim, seconds=None, minutes=None, hours=None, steps=None) -> int:
     return int(round(t / sim.scene.dt))
 
 
-# the step at which the driver last opened a speed window, per simulation: a later drive that starts inside the
-# next frame's window knows whether that window is open (continuing a run in a notebook) or was restored from a
-# checkpoint (--resume: the simulation is new, with no entry)
-_window_opened = weakref.WeakKeyDictionary()
+class SpeedWindow:
+    """The displayed speed's window (module docstring): where it opens before a frame, and whether a frame's speeds
+    cover all of it. The step it opened at is the simulation's own (sim.speed_window_start, kept in checkpoints),
+    so a run continued in a notebook or resumed from a checkpoint knows whether the coming frame's window is open."""
+
+    def __init__(self, sim, seconds: float, stepped: list, start_step: int):
+        self.sim, self.seconds, self.stepped, self.start_step = sim, seconds, stepped, start_step
+        self.dt = sim.scene.dt
+        self.steps = max(1, int(round(seconds / self.dt)))
+        self.forced = -1              # where this run opened a window the schedule did not
+
+    def start_for(self, F: int) -> int:
+        """The step the window of the frame at F opens: a window back, but not before the previous frame."""
+        prev = max([w.trigger.prev_before(F) for w in self.stepped], default=self.start_step)
+        return max(F - self.steps, prev)
+
+    def full(self, F: int) -> bool:
+        """The speeds of the frame at F are averaged over the full window."""
+        ws = max(self.start_for(F), self.forced) if F > 0 else F
+        return F > 0 and (F - ws) * self.dt >= self.seconds - 0.5 * self.dt
+
+    def open(self) -> None:
+        self.sim.snapshot_speed()
+
+    def open_if_missing(self, F) -> None:
+        """A run that starts inside the coming frame's window this simulation did not open opens one now."""
+        step = self.sim.step_count
+        if F is not None and self.start_for(F) < step < F and self.sim.speed_window_start != self.start_for(F):
+            self.open()
+            self.forced = step
 
 
 def drive(sim, n_steps: int, writers=(), *, chunk_steps: int = 2000, speed_window_s: float | None = None,
@@ -136,11 +161,10 @@ def drive(sim, n_steps: int, writers=(), *, chunk_steps: int = 2000, speed_windo
     polled = [w for w in writers if w.trigger is not None and not is_step_trigger(w.trigger)]
     riders = [w for w in writers if w.trigger is None]
     finals = [w for w in writers if getattr(w, "final", False)]
-    if speed_window_s is None:
-        speed_window_s = sim.scene.speed_window_s
-    window = max(1, int(round(speed_window_s / dt)))
     run = Run(sim, writers, sim.step_count + int(n_steps))
     end = run.end_step
+    window = SpeedWindow(sim, sim.scene.speed_window_s if speed_window_s is None else speed_window_s, stepped,
+                         run.start_step)
 
     def next_event(step):
         cands = [w.trigger.next_after(step) for w in stepped]
@@ -148,26 +172,14 @@ def drive(sim, n_steps: int, writers=(), *, chunk_steps: int = 2000, speed_windo
             cands.append(end)
         return min(cands) if cands else None
 
-    def window_start(F):
-        prev = max([w.trigger.prev_before(F) for w in stepped], default=run.start_step)
-        return max(F - window, prev)
-
     def event(F):
         due = [w for w in writers if (w in stepped and w.trigger(F)) or (w in finals and F == end) or w in riders]
         if not any(w not in riders for w in due):
             return
-        ws = max(window_start(F), forced[0]) if F > 0 else F
-        run.full_window = F > 0 and (F - ws) * dt >= speed_window_s - 0.5 * dt
+        run.full_window = window.full(F)
         for w in due:
             w.write(run)
         run.last_frame = run.frame
-
-    def open_window(step):
-        sim.snapshot_speed()
-        try:
-            _window_opened[sim] = step
-        except TypeError:
-            pass
 
     def advance_chunk(n, F):
         """n steps, the frame at F if they reach it, the writers' after_chunk; rolled back and redone at split
@@ -176,7 +188,7 @@ def drive(sim, n_steps: int, writers=(), *, chunk_steps: int = 2000, speed_windo
         split, redone = 1, []
         while True:
             try:
-                sim.run(n) if split == 1 else sim.run_split(n, split)
+                sim.advance(n) if split == 1 else sim.advance_split(n, split)
                 run.steps_done += n
                 if sim.step_count == F:
                     event(F)
@@ -198,7 +210,6 @@ def drive(sim, n_steps: int, writers=(), *, chunk_steps: int = 2000, speed_windo
                 redone.append((sim.step_count, sim.time, split))
                 sim.rollbacks.append(redone[-1])
 
-    forced = [-1]                     # where this call opened a window the schedule did not
     wall0 = time.perf_counter()
     try:
         with (Interrupt() if catch_signals else _NoInterrupt()) as intr:
@@ -206,19 +217,15 @@ def drive(sim, n_steps: int, writers=(), *, chunk_steps: int = 2000, speed_windo
                 w.start(run)          # the progress line appears once signals are caught
             if sim.step_count == 0:
                 event(0)
-            F = next_event(sim.step_count)
-            if F is not None and window_start(F) < sim.step_count < F and \
-                    _opened_at(sim, window_start(F)) != window_start(F):
-                open_window(sim.step_count)   # a window this simulation did not open for the coming frame
-                forced[0] = sim.step_count
+            window.open_if_missing(next_event(sim.step_count))
             while sim.step_count < end:
                 step = sim.step_count
                 F = next_event(step)
                 target = end
                 if F is not None:
-                    ws = window_start(F)
+                    ws = window.start_for(F)
                     if step == ws:
-                        open_window(step)
+                        window.open()
                     target = min(end, ws if step < ws else F)
                 n = min(target - step, chunk_steps)
                 if stop_after_steps is not None:
@@ -242,13 +249,6 @@ def drive(sim, n_steps: int, writers=(), *, chunk_steps: int = 2000, speed_windo
     for w in writers:
         w.finish(run)
     return run
-
-
-def _opened_at(sim, default):
-    try:
-        return _window_opened.get(sim, default)
-    except TypeError:           # not weakly referable: no record
-        return default
 
 
 class _NoInterrupt:

@@ -1,0 +1,73 @@
+"""The benchmark scripts of the clone (benchmarks/): they are not a command of the installed tool; each writes into
+benchmarks-results/ in the current directory unless --out names a folder, and the stability sweep writes the limits
+it measured there too, never into the package's stability_limits.json; accuracy_outcomes compares the seeds of
+earlier CSVs (--rows) and of sweep folders as one ensemble, a run listed twice counting once."""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def _benchmark(name: str):
+    """A script of benchmarks/ as a module (they import their neighbour benchlib: benchmarks/ goes on the path)."""
+    import importlib
+    if str(REPO / "benchmarks") not in sys.path:
+        sys.path.insert(0, str(REPO / "benchmarks"))
+    return importlib.import_module(name)
+
+
+def test_benchmarks_default_to_a_results_folder_in_the_current_directory(tmp_path, capsys):
+    """Benchmarks are scripts of the clone (benchmarks/), not a command of the installed tool; each writes into
+    benchmarks-results/ in the current directory unless --out names a folder, and the stability sweep writes the
+    limits it measured there too, never into the package's stability_limits.json."""
+    import inspect
+
+    from taichimyxo.cli import _build_parser
+    with pytest.raises(SystemExit):
+        _build_parser().parse_args(["bench", "stability"])
+    for name in ("throughput", "accuracy", "stability_sweep"):
+        mod = _benchmark(name)
+        assert mod.build_parser().parse_args([]).out == "benchmarks-results", name
+        assert inspect.signature(mod.main).parameters["out_dir"].default == "benchmarks-results", name
+    sweep = _benchmark("stability_sweep")
+    assert "write_limits" not in inspect.signature(sweep.main).parameters
+    with pytest.raises(SystemExit):
+        sweep.build_parser().parse_args(["--write-limits"])
+    package_limits = REPO / "taichimyxo" / "stability_limits.json"
+    before = package_limits.read_bytes()
+    path = sweep.write_limits(tmp_path, {"explicit": {"1e-17/0.01": 5.0}})
+    assert path == tmp_path / "stability_limits.json" and package_limits.read_bytes() == before
+    written = json.loads(path.read_text())
+    assert written["explicit"]["1e-17/0.01"] == 5.0 and written["defaults"]["explicit"]["1e-17/0.01"] == 2.0
+
+
+def test_accuracy_outcomes_compares_seeds_run_on_different_days_as_one_ensemble(tmp_path, capsys):
+    """The outcome check reads the runs of an earlier accuracy_outcomes.csv (--rows) as well as sweep folders, so a
+    reference extended by new seeds is compared as one ensemble; a run listed twice counts once."""
+    mod = _benchmark("accuracy_outcomes")
+    head = ("setting,seed,simulated_h,wall_s,steps,wall_s_per_sim_h,n_aggregates,aggregate_cells,"
+            "fraction_in_aggregates,edge_speed_vb,speed_p95_vb")
+    ref, big = '"{""run.dt_ms"": 2}"', '"{""run.dt_ms"": 4}"'
+
+    def row(setting, seed, frac):
+        return f"{setting},{seed},1.0,100.0,1800000,100.0,20,14,{frac},1.6,1.9"
+    first = tmp_path / "first.csv"
+    first.write_text("\n".join([head, row(ref, 1, 0.60), row(ref, 2, 0.58), row(big, 1, 0.50)]) + "\n")
+    later = tmp_path / "later.csv"
+    later.write_text("\n".join([head, row(ref, 3, 0.45), row(ref, 1, 0.99), row(big, 2, 0.52)]) + "\n")
+    out = tmp_path / "out"
+    assert mod.main(["--rows", str(first), "--rows", str(later), "--out", str(out)]) == 0
+    cmp = {(c["setting"], c["outcome"]): c for c in mod.compare(mod.read_rows(out / "accuracy_outcomes.csv"),
+                                                                 '{"run.dt_ms": 2}')}
+    frac = cmp[('{"run.dt_ms": 2}', "fraction_in_aggregates")]
+    assert frac["values"] == [0.60, 0.58, 0.45]            # seed 1 from the first file, once
+    four = cmp[('{"run.dt_ms": 4}', "fraction_in_aggregates")]
+    assert four["seeds"] == 2 and four["agrees"] is True    # mean 0.51 within the reference's 0.45-0.60
+    assert "agrees with the reference on every outcome" in (out / "accuracy_outcomes.md").read_text()
+    assert mod.main(["--rows", str(tmp_path / "missing.csv")]) == 2
+    assert "no such file" in capsys.readouterr().out

@@ -1,0 +1,177 @@
+"""Initial configurations (taichimyxo/placement.py): density, no overlaps, area fraction, spiral head to tail, the
+batched random placement, and what a start that cannot place its cells says."""
+
+import numpy as np
+import pytest
+
+from simtools import build_small_scene, cli, error_line
+from taichimyxo.geometry import closest_points, min_image, sample_polyline_contacts
+from taichimyxo.placement import initial_configuration
+from taichimyxo.scene import Scene, defaults
+
+
+def test_random_start_has_the_density_and_no_overlaps():
+    sc = Scene.from_dict({"domain": {"width_um": 60.0, "height_um": 60.0}})
+    pos, ke = initial_configuration(sc)
+    assert len(pos) == round(5e6 * 1e-8 * 60 * 60) == 180
+    assert set(np.unique(ke)) == {-1, 1}
+    assert min_segment_distance_between_cells(pos, sc.box) >= sc.width
+    # uniform: every quadrant holds a fair share of the cells
+    centres = np.mod(pos.mean(1), 60.0)
+    q = np.histogram2d(centres[:, 0], centres[:, 1], bins=2, range=[[0, 60], [0, 60]])[0]
+    assert q.min() > 0.15 * len(pos)
+    # straight cells with rest-length segments
+    seg = np.linalg.norm(np.diff(pos, axis=1), axis=-1)
+    np.testing.assert_allclose(seg, 4.5 / 7, rtol=1e-12)
+
+
+def test_aligned_start_fills_area_fraction_one():
+    sc = Scene.from_dict({"domain": {"width_um": 20.0, "height_um": 20.0},
+                          "population": {"start": "aligned", "density_cells_per_cm2": 4e7}})
+    pos, ke = initial_configuration(sc)
+    n = len(pos)
+    assert n * sc.length * sc.width / (20.0 * 20.0) == pytest.approx(1.0)
+    # all parallel to x, rows W apart, no overlap deeper than round-off (caps just touch)
+    d = np.diff(pos, axis=1)
+    assert np.abs(d[:, :, 1]).max() < 1e-12
+    rows = np.unique(np.round(pos[:, 0, 1], 9))
+    assert np.allclose(np.diff(rows), sc.width)
+    for a, b in [(0, 1), (0, 4), (3, 4)]:
+        pa, pb = pos[a], pos[b]
+        s, t, c1, c2, dist = closest_points(pa[:-1, None], pa[1:, None], pb[None, :-1] + min_image(
+            pb[None, :-1] - pa[:-1, None], sc.box) - (pb[None, :-1] - pa[:-1, None]),
+            pb[None, 1:] + min_image(pb[None, :-1] - pa[:-1, None], sc.box) - (pb[None, :-1] - pa[:-1, None]))
+        assert dist.min() >= sc.width - 1e-9
+
+
+def test_spiral_start_cells_head_to_tail():
+    sc = Scene.from_dict({"domain": {"width_um": 100.0, "height_um": 100.0},
+                          "population": {"start": "spiral", "cells": 500, "polarity": "same"}})
+    pos, ke = initial_configuration(sc)
+    assert (ke == 1).all()
+    heads = pos[:, 0]
+    tails = pos[:, -1]
+    # cell c follows cell c - 1: its head is within guiding range of its leader's tail
+    gaps = np.linalg.norm(heads[1:] - tails[:-1], axis=1) - sc.width
+    assert gaps.max() < 0.25 and gaps.min() > 0.0
+    # leaders inward (the paper's S5 Fig): every head is nearer the axis than its own tail, and every trailing cell
+    # is further from the axis than its leader
+    axis = np.array(sc.box) / 2
+    def r(p):
+        return np.linalg.norm(p - axis, axis=-1)
+    assert np.all(r(heads) < r(tails))
+    assert np.all(np.diff(r(pos.mean(axis=1))) > 0)
+    seg = np.linalg.norm(np.diff(pos, axis=1), axis=-1)
+    np.testing.assert_allclose(seg, sc.rest_length, rtol=1e-9)
+    # turns W apart: neighbouring turns touch but do not overlap by more than 1 % of W
+    d = sample_polyline_contacts(pos[:60], sc.box, sc.width)[3]
+    assert np.all(d > 0.99 * sc.width)
+    # the spiral fits in the box, centred
+    assert np.abs(pos.reshape(-1, 2) - 50.0).max() < 50.0
+
+
+def min_segment_distance_between_cells(pos, box):
+    """Smallest segment-segment distance between different cells (periodic), vectorised over cell pairs."""
+    n = len(pos)
+    i, j = np.triu_indices(n, 1)
+    c = pos.mean(1)
+    near = np.linalg.norm(min_image(c[j] - c[i], box), axis=1) < 6.0
+    i, j = i[near], j[near]
+    shift = min_image(pos[j, :1] - pos[i, :1], box) - (pos[j, :1] - pos[i, :1])     # (m, 1, 2)
+    a, b = pos[i], pos[j] + shift
+    d = closest_points(a[:, :-1, None], a[:, 1:, None], b[:, None, :-1], b[:, None, 1:])[4]
+    return d.min() if len(d) else np.inf
+
+
+# ------------------------------------------------------------------------------------------------ random placement
+def unvalidated_scene(box: float, cells: int, **over) -> Scene:
+    """A Scene that skips Scene.validate (to hand the placement inputs validation would refuse)."""
+    raw = defaults()
+    raw["domain"].update(width_um=box, height_um=box)
+    raw["population"]["cells"] = cells
+    for sec, vals in over.items():
+        raw[sec].update(vals)
+    return Scene(raw=raw)
+
+
+def _one_try_at_a_time(scene):
+    """The random start as it was first written: one try per loop, 7 x 7 sub-segments per pair (the reference the
+    batched placement must reproduce exactly)."""
+    import math
+
+    from taichimyxo import rng
+    from taichimyxo.geometry import closest_points, min_image
+    from taichimyxo.placement import straight_cell
+    n, N, l0, W = scene.n_cells, scene.N, scene.rest_length, scene.width
+    box = np.array(scene.box)
+    draws = rng.Stream(scene.seed, rng.STREAM_PLACE)
+    pos, centres = np.zeros((n, N, 2)), np.zeros((n, 2))
+    placed = 0
+    while placed < n:
+        r = draws.next(3)
+        c, ang = r[:2] * box, r[2] * 2 * math.pi
+        cell = straight_cell(c, ang, N, l0)
+        if placed:
+            shift = min_image(centres[:placed] - c, box) - (centres[:placed] - c)
+            others = pos[:placed] + shift[:, None, :]
+            d = closest_points(cell[:-1][None, :, None], cell[1:][None, :, None], others[:, None, :-1],
+                               others[:, None, 1:])[4]
+            if np.any(d < W):
+                continue
+        pos[placed], centres[placed] = cell, c
+        placed += 1
+    return pos
+
+
+@pytest.mark.parametrize("box,cells,seed", [(30.0, 60, 2), (40.0, 200, 7), (12.0, 3, 5)])
+def test_batched_random_placement_places_the_same_cells(box, cells, seed):
+    from taichimyxo.placement import random_start
+    sc = build_small_scene(cells, box=(box, box), run={"seed": seed})
+    assert np.array_equal(random_start(sc)[0], _one_try_at_a_time(sc))
+
+
+def test_random_placement_gives_up_within_its_budget():
+    """0.6 of the area cannot be placed at random: the placement stops after its budget of tries, not never."""
+    from taichimyxo.placement import PlacementError, random_start
+    sc = unvalidated_scene(30.0, 216)                                   # area fraction 0.6
+    seen = []
+    with pytest.raises(PlacementError, match="gave up after 20800 tries"):
+        random_start(sc, max_tries_per_cell=50, progress=lambda placed, n, tries: seen.append(tries))
+    assert seen and seen[-1] <= 50 * 216 + 10_000
+
+
+def test_random_start_above_what_it_places_is_refused_before_placing(tmp_path):
+    """The issue's 490 cells in 50 x 50 µm (area fraction 0.49): one line at once, not a silent hang."""
+    line = error_line(cli("scene", "S1", "--no-movie", "--out", tmp_path / "o", "--set", "domain.width_um=50",
+                          "--set", "domain.height_um=50", "--set", "population.cells=490"))
+    assert "population.cells = 490 covers 0.49" in line and "'random' start can place at most 0.40" in line
+    assert not (tmp_path / "o").exists()
+
+
+def test_preview_leaves_set_values_alone_and_says_what_it_scaled(tmp_path):
+    """The issue's `--preview --set population.cells=7800`: the cells the user set are not scaled; the error says
+    what --preview did scale, and from what."""
+    line = error_line(cli("scene", "S1", "--preview", "--no-movie", "--out", tmp_path / "o",
+                          "--set", "population.cells=7800"))
+    assert "population.cells = 7800" in line
+    assert "--preview scaled domain.width_um from 200 to 50, domain.height_um from 200 to 50" in line
+    sc = Scene.load("S1", {"population": {"cells": 100}, "domain": {"width_um": 80.0}}, preview=True)
+    assert (sc.n_cells, sc.box) == (100, (80.0, 50.0))
+    assert set(sc.preview_scaled) >= {"domain.height_um", "run.hours"} and "domain.width_um" not in sc.preview_scaled
+
+
+def test_dense_feasible_start_shows_placement_progress(tmp_path):
+    """126 cells in 30 x 30 µm (area fraction 0.35): placed, with progress on stderr, and the run's progress is
+    plain lines (stderr is a pipe here), simulated time with its unit."""
+    out = tmp_path / "o"
+    p = cli("scene", "S1", "--no-movie", "--out", out, "--set", "domain.width_um=30", "--set", "domain.height_um=30",
+            "--set", "population.cells=126", "--hours", "0.0002")
+    assert p.returncode == 0, p.stderr
+    assert "taichimyxo: placing 126 cells at random (area fraction 0.35)" in p.stderr
+    assert "taichimyxo: placed 126 of 126 cells" in p.stderr
+    assert "\r" not in p.stderr
+    progress = [ln for ln in p.stderr.splitlines() if ln.startswith("S1: ")]
+    # a run this short ends within its first chunk, which compiles the kernels: no rate is measured, so no ETA
+    assert progress and all(" simulated (" in ln and (ln.endswith(" left") or " ..." in ln) for ln in progress)
+    assert not any(ln.endswith(" left") for ln in progress)
+    assert progress[-1].startswith("S1: 0.7 s of 0.7 s simulated (100 %)")

@@ -1,0 +1,54 @@
+"""What a run reports: the progress line (one line per interval, simulated time with its unit, no time left before
+a rate is measured, plain lines when the stream is not a terminal and one line redrawn with \\r when it is), and the
+summary after a resume, which pairs this session's steps with this session's wall time and gives the run's totals
+over all its sessions."""
+from __future__ import annotations
+
+import io
+
+import pytest
+
+from simtools import build_small_scene
+
+
+def test_progress_is_one_plain_line_per_interval_off_a_terminal():
+    from taichimyxo.status_line import Progress, duration
+    assert [duration(s) for s in (3.61, 65, 3900, 6 * 3600)] == ["3.6 s", "1 min 05 s", "1 h 05 min", "6 h 00 min"]
+    log = io.StringIO()
+    bar = Progress("S3", total_steps=10_800_000, dt=0.002, start_step=0, stream=log, interval_s=3600)
+    bar.update(0, force=True)
+    for step in range(1, 100):
+        bar.update(step * 1000)                                        # within the interval: nothing
+    bar.close(1_950_000)
+    lines = log.getvalue().split("\n")
+    assert len(lines) == 3 and lines[-1] == "" and "\r" not in log.getvalue()
+    assert lines[0] == "S3: 0.0 s of 6 h 00 min simulated (0 %), starting ..."     # no time left before a rate
+    assert lines[1].startswith("S3: 1 h 05 min of 6 h 00 min simulated (18 %), ")
+    assert lines[1].count("steps/s") == 1
+
+    class Tty(io.StringIO):
+        def isatty(self):
+            return True
+    tty = Tty()
+    bar = Progress("S3", 100, 1.0, 0, stream=tty)
+    bar.update(0, force=True)
+    bar.close(100)
+    assert tty.getvalue().startswith("\rS3: ") and tty.getvalue().count("\r") == 2 and tty.getvalue().endswith("\n")
+
+
+def test_summary_after_resume_pairs_this_sessions_steps_with_its_wall_time(ti_cpu, tmp_path, capsys):
+    from taichimyxo.cli import _print_summary
+    from taichimyxo.scene_run import run_scene
+    sc = build_small_scene(4, run={"hours": 0.001, "dt_ms": 1.0})               # 3600 steps
+    out = tmp_path / "out"
+    first = run_scene(sc, out_dir=out, stop_after_steps=1000, progress=False)
+    assert (first["steps"], first["steps_this_session"], first["sessions"]) == (1000, 1000, 1)
+    rest = run_scene(sc, out_dir=out, resume=True, progress=False)
+    assert rest["completed"] and rest["steps"] == 3600 and rest["steps_this_session"] == 2600
+    assert rest["sessions"] == 2
+    assert rest["wall_seconds_total"] == pytest.approx(first["wall_seconds"] + rest["wall_seconds"])
+    assert rest["particle_steps_per_second"] == pytest.approx(2600 * sc.n_cells * sc.N / rest["wall_seconds"])
+    _print_summary(rest, str(out))
+    line = capsys.readouterr().out.splitlines()[0]
+    assert f", 2600 steps (2.6 s simulated) in {rest['wall_seconds']:.1f} s wall" in line
+    assert "; run total over 2 sessions: 3600 steps, 3.6 s simulated" in line
