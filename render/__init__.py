@@ -16,10 +16,10 @@ import math
 import os
 
 from .colors import COLORINGS, CategoricalScale, ColorScale, make_scale, speed_scale, strain_scale
-from .raster import Layout, Renderer, Viewport, compute_layout, format_time, frame_size, get_renderer, render_frame
+from .raster import FrameLayout, Renderer, Viewport, compute_layout, format_time, frame_size, get_renderer, render_frame
 from .video import PNG_SIZE, VideoWriteError, VideoWriter, verify_video, write_png
 
-__all__ = ["render_frame", "VideoWriter", "write_png", "render_trajectory", "Renderer", "Viewport", "Layout",
+__all__ = ["render_frame", "VideoWriter", "write_png", "render_trajectory", "Renderer", "Viewport", "FrameLayout",
            "ColorScale", "CategoricalScale", "COLORINGS", "make_scale", "speed_scale", "strain_scale",
            "compute_layout", "format_time", "frame_size", "get_renderer", "verify_video", "VideoWriteError",
            "PNG_SIZE"]

@@ -60,7 +60,7 @@ class Viewport:
 
 
 @dataclass(frozen=True)
-class Layout:
+class FrameLayout:
     """Pixel layout of a frame. Rectangles are half-open (row0, row1, col0, col1)."""
     size: tuple[int, int]                       # (width, height) px of the frame (the fitted size when fit=True)
     viewport: Viewport
@@ -131,7 +131,7 @@ def legend_metrics(scale, f: float):
 
 
 def compute_layout(size: tuple[int, int], box: tuple[float, float], decorations: bool = True, *, fit: bool = True,
-                   scale=None, title: str | None = None) -> Layout:
+                   scale=None, title: str | None = None) -> FrameLayout:
     """Place the box, legend, time, scale bar and title for a request of ``size`` (width, height) px.
 
     fit=True: the frame takes the box's aspect ratio within ``size`` (see the module docstring); fit=False: exactly
@@ -167,7 +167,7 @@ def compute_layout(size: tuple[int, int], box: tuple[float, float], decorations:
     if not decorations:
         s, bw, bh = place(0)
         fsize, vp = finish(s, bw, bh, 0, 0)
-        return Layout(fsize, vp, g, None, None, 0.0, None, None, f, 0, "center", (W, H))
+        return FrameLayout(fsize, vp, g, None, None, 0.0, None, None, f, 0, "center", (W, H))
 
     scale = make_scale("speed") if scale is None else scale
     cb_min, ov_l, ov_r, leg_h, cb_h = legend_metrics(scale, f)
@@ -204,7 +204,7 @@ def compute_layout(size: tuple[int, int], box: tuple[float, float], decorations:
         scalebar = (sb_row, sb_row + sb_h, rc - sb_len // 2, rc - sb_len // 2 + sb_len)
         time_center = (top + round(0.5 * time_h), rc)
         title_center = (round(sb_row + sb_h + 0.3 * f + 0.65 * f), rc) if title else None
-        return Layout((Wf, Hf), vp, g, colorbar, scalebar, sb_um, time_center, title_center, f, 1, "center",
+        return FrameLayout((Wf, Hf), vp, g, colorbar, scalebar, sb_um, time_center, title_center, f, 1, "center",
                       (W, H))
 
     # two rows: the legend across the strip; under it the time (left), title (middle), scale bar (right)
@@ -241,4 +241,4 @@ def compute_layout(size: tuple[int, int], box: tuple[float, float], decorations:
             title_center = (r2 + round(0.5 * time_h), sx0 + (time_w + sw - max(sb_len, sb_label_w)) // 2)
         else:
             title_center = (r2 + round(row2_h + 0.3 * f + 0.65 * f), sx0 + sw // 2)
-    return Layout((Wf, Hf), vp, g, colorbar, scalebar, sb_um, time_center, title_center, f, 2, "left", (W, H))
+    return FrameLayout((Wf, Hf), vp, g, colorbar, scalebar, sb_um, time_center, title_center, f, 2, "left", (W, H))

@@ -51,7 +51,7 @@ from .layout import (  # noqa: F401
     LONGEST_TIME,
     MIN_FONT_PX,
     TIME_FONT,
-    Layout,
+    FrameLayout,
     Viewport,
     compute_layout,
     font_size_px,
