@@ -85,7 +85,7 @@ def make(scene, method: Method, positions=None, ke=None):
     from taichimyxo.simulation import Simulation
     if method.integrator == "imex":
         return Simulation.from_positions(scene, positions, ke, contacts=method.contacts,
-                               tol=method.tol)
+                                         tol=method.tol)
     return Simulation.from_positions(scene, positions, ke)
 
 

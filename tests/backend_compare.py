@@ -64,7 +64,7 @@ def capture(scene, positions, engine_direction, backend: Backend, steps: int, fo
         n = nl.nbr_n.to_numpy()
         out = {"nbr": _rows(nl.nbr, n), "rev": _rows(nl.rev, n), "bin_start": nl.bin_start.to_numpy(),
                "shape": sim.state.loops.kind}
-        if nl.guiding:
+        if nl.guide_lists:
             out["guide"] = _rows(nl.guide, nl.guide_n.to_numpy())
         if forces:
             out["forces"] = {k: v for k, v in sim.forces().items() if k != "tangent"}

@@ -102,7 +102,7 @@ def test_the_run_loop_copies_to_the_host_only_where_a_writer_fires(monkeypatch):
     start_backend(CPU, "mixed")
     pos, ke = start_state(LIGHT)
     sim = Simulation.from_positions(every_unit_scene(particles=LIGHT), pos, ke,
-                     loop_shape="cpu")                                  # compiled for the comparison above
+                                    loop_shape="cpu")                   # compiled for the comparison above
     at = []
 
     def counted(orig):

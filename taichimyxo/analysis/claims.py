@@ -49,8 +49,6 @@ A claim the runs given cannot support (too short, too small) says "not measurabl
 """
 from __future__ import annotations
 
-import csv
-import io
 import json
 import math
 import os
@@ -71,6 +69,7 @@ from .claim_runs import (
     runs_of,
     stable_tracks,
 )
+from .claims_table import COLUMNS, format_claims, to_csv, to_markdown, write_complete  # noqa: F401
 from .stats import series_mean_se
 from .stiffness import records_from_runs, stiffness_rows
 from .summary import json_clean
@@ -368,43 +367,6 @@ def evaluate(runs: list[dict]) -> list[dict]:
     return rows
 
 
-COLUMNS = ("claim", "measured", "paper", "status", "runs")
-
-
-def to_markdown(rows: list[dict]) -> str:
-    esc = lambda s: str(s).replace("|", "\\|").replace("\n", " ")       # noqa: E731
-    out = ["| # | " + " | ".join(COLUMNS) + " |", "|---" * (len(COLUMNS) + 1) + "|"]
-    for i, r in enumerate(rows, 1):
-        out.append(f"| {i} | " + " | ".join(esc(r[c]) for c in COLUMNS) + " |")
-    return "\n".join(out) + "\n"
-
-
-def to_csv(rows: list[dict]) -> str:
-    f = io.StringIO()
-    w = csv.writer(f)
-    w.writerow(("id",) + COLUMNS + ("plot",))
-    for r in rows:
-        w.writerow([r["id"]] + [r[c] for c in COLUMNS] + [r["plot"] or ""])
-    return f.getvalue()
-
-
-def format_claims(rows: list[dict]) -> str:
-    """The table as text for a terminal: one block per claim."""
-    out = []
-    for i, r in enumerate(rows, 1):
-        out.append(f"{i:2d}. {r['claim']}\n    measured: {r['measured']}\n    paper:    {r['paper']}\n"
-                   f"    status:   {r['status']}\n    runs:     {r['runs']}")
-    return "\n".join(out)
-
-
-def _write(path: str, text: str) -> None:
-    """Write text to path through a temporary file: an existing file is replaced only by a complete one."""
-    tmp = f"{path}.tmp-{os.getpid()}"
-    with open(tmp, "w") as f:
-        f.write(text)
-    os.replace(tmp, path)
-
-
 def claims(paths, out_dir: str | None = None, every: int = 1, v_b: float | None = None, plots: bool = True,
            progress=None, **params) -> dict:
     """Measure the paper's claims on the trajectories `paths`; write claims.md, claims.csv, claims.json (and
@@ -429,7 +391,7 @@ def claims(paths, out_dir: str | None = None, every: int = 1, v_b: float | None 
     if files:
         md += "\nPlots: " + ", ".join(os.path.basename(f) for f in files) + "\n"
     paths_out = {k: os.path.join(out_dir, f"claims.{k}") for k in ("md", "csv", "json")}
-    _write(paths_out["md"], md)
-    _write(paths_out["csv"], to_csv(rows))
-    _write(paths_out["json"], json.dumps(json_clean(doc), indent=1))
+    write_complete(paths_out["md"], md)
+    write_complete(paths_out["csv"], to_csv(rows))
+    write_complete(paths_out["json"], json.dumps(json_clean(doc), indent=1))
     return dict(rows=json_clean(rows), runs=run_info, files=list(paths_out.values()) + files)

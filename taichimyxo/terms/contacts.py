@@ -52,7 +52,7 @@ class Contacts(Term):
             # row, (forces on s's two particles, forces on t's two); both segments gather them in list order
             self.pair_f = ti.Vector.field(8, dtype=state.fdt)
             builder.dense(ti.ij, (S, neighbours.max_nbrs)).place(self.pair_f)
-            self.fa = self.fb = None
+            self.fa = self.fb = self.ct_n = self.ct_t = self.ct_w = self.overflow = None
         else:
             # the implicit step records each segment's view of its contacts, so each segment gathers its own
             self.pair_f = None
@@ -64,8 +64,6 @@ class Contacts(Term):
             self.ct_w = ti.Vector.field(4, dtype=state.fdt)
             builder.dense(ti.ij, (S, self.MAX_CONTACTS)).place(self.ct_t, self.ct_w)
             self.overflow = state.scalar(builder, 1, ti.i32)
-        if not record:
-            self.ct_n = self.ct_t = self.ct_w = self.overflow = None
 
     # ------------------------------------------------------------------ the law, in a pair's local frame
     @ti.func
@@ -376,8 +374,8 @@ class Contacts(Term):
     # ------------------------------------------------------------------ stiffness, for the linearly implicit step
     @ti.func
     def add_stiffness(self, band: ti.template(), c, xrel: ti.template(), dt):
-        """Cell c's own share of dt k_c J^T gn gn^T J for each recorded contact (lever arms held fixed; the
-        tangential geometric term is dropped). xrel is not needed: the lever arms were recorded with the forces."""
+        """Cell c's own share of dt k_c J^T gn gn^T J per recorded contact (lever arms, recorded with the forces,
+        held fixed, so xrel is unused; the tangential geometric term is dropped)."""
         N = ti.static(self.N)
         kc = dt * self.k_c
         for k in range(N - 1):
