@@ -12,14 +12,10 @@ before_after.csv (every round) and prints ms per step and wall seconds per simul
 """
 from __future__ import annotations
 
-import json
 import os
-import subprocess
-import sys
-import tempfile
 from pathlib import Path
 
-from benchlib import HERE, parser, write_csv
+from benchlib import HERE, parser, run_in_tree, worktree, write_csv
 
 REPO = HERE.parent
 WORKER = r"""
@@ -55,14 +51,10 @@ print(json.dumps({"dt_ms": sc.dt * 1e3, "ms_per_step": round(1e3 * w / steps, 3)
 
 
 def measure(tree: Path, dt_ms: float, steps: int, threads: int) -> dict:
-    env = dict(os.environ, PYTHONPATH=str(tree))
-    p = subprocess.run([sys.executable, "-c", WORKER, str(dt_ms), str(steps), str(threads),
-                        str(HERE / "states" / "S3-1h.npz")], capture_output=True, text=True, cwd=tree, env=env,
-                       timeout=1800)
-    for line in reversed(p.stdout.splitlines()):
-        if line.startswith("{"):
-            return json.loads(line)
-    raise SystemExit(f"before_after: the worker in {tree} failed: {(p.stderr or p.stdout).strip()[-300:]}")
+    try:
+        return run_in_tree(tree, WORKER, [dt_ms, steps, threads, HERE / "states" / "S3-1h.npz"])
+    except RuntimeError as e:
+        raise SystemExit(f"before_after: {e}") from None
 
 
 def main() -> None:
@@ -74,23 +66,17 @@ def main() -> None:
     p.add_argument("--also-dt-ms", type=float, default=2.0, help="the working tree also at this step (0: skip)")
     a = p.parse_args()
     rows = []
-    with tempfile.TemporaryDirectory() as tmp:
-        old = Path(tmp) / "before"
-        subprocess.run(["git", "-C", str(REPO), "worktree", "add", "-f", "--detach", str(old), a.before],
-                       check=True, capture_output=True)
-        try:
-            sides = [("before", old, 0.0), ("after", REPO, 0.0)]
-            if a.also_dt_ms:
-                sides.append((f"after at {a.also_dt_ms:g} ms", REPO, a.also_dt_ms))
-            for rnd in range(a.rounds):
-                for label, tree, dt in sides:
-                    r = {"side": label, "round": rnd, **measure(tree, dt, a.steps, a.threads)}
-                    rows.append(r)
-                    print(f"round {rnd} {label:>16}: {r['dt_ms']:g} ms step, {r['ms_per_step']:.3f} ms/step, "
-                          f"{r['wall_s_per_simulated_s']:.3f} wall s per simulated s, "
-                          f"{r['rebuilds_per_1000_steps']:g} rebuilds per 1000 steps", flush=True)
-        finally:
-            subprocess.run(["git", "-C", str(REPO), "worktree", "remove", "--force", str(old)], capture_output=True)
+    with worktree(a.before) as old:
+        sides = [("before", old, 0.0), ("after", REPO, 0.0)]
+        if a.also_dt_ms:
+            sides.append((f"after at {a.also_dt_ms:g} ms", REPO, a.also_dt_ms))
+        for rnd in range(a.rounds):
+            for label, tree, dt in sides:
+                r = {"side": label, "round": rnd, **measure(tree, dt, a.steps, a.threads)}
+                rows.append(r)
+                print(f"round {rnd} {label:>16}: {r['dt_ms']:g} ms step, {r['ms_per_step']:.3f} ms/step, "
+                      f"{r['wall_s_per_simulated_s']:.3f} wall s per simulated s, "
+                      f"{r['rebuilds_per_1000_steps']:g} rebuilds per 1000 steps", flush=True)
     print(f"load average (1, 5, 15 min): {[round(x, 2) for x in os.getloadavg()]}")
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -8,6 +8,7 @@ taichimyxo.placement, taichimyxo.invariants, taichimyxo.backend).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import subprocess
@@ -145,3 +146,31 @@ def write_csv(path: Path, rows: list[dict], cols: list[str] | None = None, float
         w.writeheader()
         for r in rows:
             w.writerow({k: (format(v, float_fmt) if float_fmt and isinstance(v, float) else v) for k, v in r.items()})
+
+
+def run_in_tree(tree, code: str, args: list, timeout: float = 1800):
+    """Run `code` (python -c) with `args` in the source tree `tree` (its own process, the package imported from
+    there); the dict of the last JSON line it prints, or RuntimeError with the end of its error output."""
+    import os
+    env = dict(os.environ, PYTHONPATH=str(tree))
+    p = subprocess.run([sys.executable, "-c", code, *map(str, args)], capture_output=True, text=True, cwd=tree,
+                       env=env, timeout=timeout)
+    for line in reversed(p.stdout.splitlines()):
+        if line.startswith("{"):
+            return json.loads(line)
+    raise RuntimeError(f"the worker in {tree} failed: {(p.stderr or p.stdout).strip()[-300:]}")
+
+
+@contextlib.contextmanager
+def worktree(commit: str):
+    """An earlier commit checked out into a temporary git worktree (removed afterwards); yields its path."""
+    import tempfile
+    with tempfile.TemporaryDirectory(prefix="worktree-") as tmp:
+        path = Path(tmp) / "tree"
+        subprocess.run(["git", "-C", str(HERE.parent), "worktree", "add", "-f", "--detach", str(path), commit],
+                       check=True, capture_output=True)
+        try:
+            yield path
+        finally:
+            subprocess.run(["git", "-C", str(HERE.parent), "worktree", "remove", "--force", str(path)],
+                           capture_output=True)

@@ -12,13 +12,10 @@ Writes same_runs.csv and exits 1 when any case differs.
 from __future__ import annotations
 
 import json
-import os
-import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
-from benchlib import HERE, parser, write_csv
+from benchlib import HERE, parser, run_in_tree, worktree, write_csv
 
 REPO = HERE.parent
 
@@ -70,13 +67,7 @@ print(json.dumps({"sha256": h.hexdigest(), "steps": sim.step_count, "rebuilds": 
 
 def fingerprint(tree: Path, case: str, steps: int, threads: int) -> dict:
     scene, over, options = CASES[case]
-    env = dict(os.environ, PYTHONPATH=str(tree))
-    p = subprocess.run([sys.executable, "-c", WORKER, scene, json.dumps(over), str(threads), str(steps),
-                        json.dumps(options)], capture_output=True, text=True, cwd=tree, env=env, timeout=1800)
-    for line in reversed(p.stdout.splitlines()):
-        if line.startswith("{"):
-            return json.loads(line)
-    raise RuntimeError(f"{case} in {tree}: {p.stderr.strip().splitlines()[-1:]}")
+    return run_in_tree(tree, WORKER, [scene, json.dumps(over), threads, steps, json.dumps(options)])
 
 
 def main() -> int:
@@ -92,23 +83,16 @@ def main() -> int:
         print(f"same_runs: unknown case(s) {unknown}; known: {list(CASES)}", file=sys.stderr)
         return 2
     rows, differ = [], 0
-    with tempfile.TemporaryDirectory(prefix="same-runs-") as tmp:
-        before = Path(tmp) / "before"
-        subprocess.run(["git", "-C", str(REPO), "worktree", "add", "--detach", str(before), args.before],
-                       check=True, capture_output=True)
-        try:
-            for case in cases:
-                a = fingerprint(before, case, args.steps, args.threads)
-                b = fingerprint(REPO, case, args.steps, args.threads)
-                same = a == b
-                differ += not same
-                rows.append({"case": case, "scene": CASES[case][0], "steps": b["steps"], "rebuilds": b["rebuilds"],
-                             "same": same, "before_sha256": a["sha256"][:16], "after_sha256": b["sha256"][:16]})
-                print(f"{case:24s} {'same' if same else 'DIFFERENT'}  {a['sha256'][:16]} {b['sha256'][:16]}",
-                      flush=True)
-        finally:
-            subprocess.run(["git", "-C", str(REPO), "worktree", "remove", "--force", str(before)],
-                           capture_output=True)
+    with worktree(args.before) as before:
+        for case in cases:
+            a = fingerprint(before, case, args.steps, args.threads)
+            b = fingerprint(REPO, case, args.steps, args.threads)
+            same = a == b
+            differ += not same
+            rows.append({"case": case, "scene": CASES[case][0], "steps": b["steps"], "rebuilds": b["rebuilds"],
+                         "same": same, "before_sha256": a["sha256"][:16], "after_sha256": b["sha256"][:16]})
+            print(f"{case:24s} {'same' if same else 'DIFFERENT'}  {a['sha256'][:16]} {b['sha256'][:16]}",
+                  flush=True)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     write_csv(out / "same_runs.csv", rows)
