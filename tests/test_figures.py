@@ -96,6 +96,32 @@ def test_no_run_composes_from_finished_runs(tmp_path, capsys):
     assert (out / "Fig3.half.png").stat().st_size > 10000 and (out / "Fig3.half.pdf").is_file()
 
 
+def test_records_compose_a_figure_whose_run_folders_are_gone(tmp_path, capsys):
+    """Each finished run is kept as a small record; with the run folders gone (another machine, a wiped one) the
+    figure is composed from the records the same way, and a run of the figure does not redo recorded runs."""
+    import shutil
+    out, records = tmp_path / "figs", tmp_path / "kept"
+    runs = plan_figure(FIGURES["Fig3"], "half", out)
+    _fake_finished_runs(runs, gas=30, seed=1)
+    args = ["figures", "Fig3", "--scale", "half", "--out", str(out), "--records", str(records)]
+    assert main([*args, "--no-run"]) == 0
+    kept = sorted((records / "Fig3.half").glob("*.npz"))
+    assert [k.stem for k in kept] == sorted(p.dir_name for p in runs.points)
+    assert all(k.stat().st_size < 200_000 for k in kept)
+    before = json.loads((out / "Fig3.half.json").read_text())
+    shutil.rmtree(out / "Fig3" / "runs")
+    (out / "Fig3.half.json").unlink()
+    assert main([*args, "--no-run"]) == 0
+    after = json.loads((out / "Fig3.half.json").read_text())
+    assert [(p["drawn"], p["time_s"]) for p in after["panels"]] == [(p["drawn"], p["time_s"]) for p in before["panels"]]
+    assert all(p["run"].endswith(".npz") for p in after["panels"])
+    runs.records = records
+    assert runs.states() == ["recorded", "recorded"]
+    assert main(args) == 0                               # nothing left to run: the records stand for the runs
+    assert not (out / "Fig3" / "runs").exists()
+    capsys.readouterr()
+
+
 def test_strain_panel_without_logged_strain_says_so(tmp_path):
     from taichimyxo.figures.compose import compose_figure
     runs = plan_figure(FIGURES["Fig4"], "half", tmp_path)
@@ -123,6 +149,16 @@ def test_composite_from_tiny_runs_with_stiffness_series(tmp_path):
     assert claims.count("not measurable here") == 4                       # 3.6 s runs support no verdict
     assert {f.name for f in files} >= {"S2Fig.tiny.png", "S2Fig.tiny.pdf", "stiffness.tiny.png"}
     assert run_all([runs], "local", 2, {}) == 0                           # a rerun skips the finished runs
+    # kept as records, the runs give the same series once their folders are gone
+    import shutil
+
+    from taichimyxo.figures.records import save_records
+    runs.records = tmp_path / "records"
+    assert len(save_records(runs, runs.records)) == 4
+    shutil.rmtree(runs.root / "runs")
+    assert runs.states() == ["recorded"] * 4
+    compose_figure(runs, tmp_path / "again")
+    assert (tmp_path / "again" / "stiffness.tiny.csv").read_text() == csv_text
 
 
 # ------------------------------------------------------------------------------------------------ rigidity

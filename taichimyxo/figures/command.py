@@ -11,6 +11,7 @@ import os
 import sys
 from pathlib import Path
 
+from .plan import FINISHED
 from .specs import FIGURES, SCALES, figure
 
 EXIT_RUN_FAILED = 1
@@ -29,6 +30,9 @@ def add_parser(sub, executor_arguments) -> None:
                                              "S3Fig, 1 for the others); the panels show the first")
     f.add_argument("--threads", type=int, default=None, help="CPU threads per run, local executor (default 1)")
     f.add_argument("--out", default="figures", help="output folder: the figures and their runs (default figures/)")
+    f.add_argument("--records", metavar="DIR", help="where each finished run is kept as a small record the figure "
+                                                    "can be composed from when its run folder is gone (default: "
+                                                    "OUT/records; docs/figures.md)")
     f.add_argument("--dry-run", action="store_true", help="the runs, simulated hours and estimated wall time; "
                                                           "nothing runs or is written")
     f.add_argument("--no-run", action="store_true", help="compose from finished runs only; missing runs are refused")
@@ -61,13 +65,16 @@ def cmd_figures(args, options: dict) -> int:
         raise FigureError("figures: --dry-run and --no-run together; keep one")
     figs = resolve_names(args.names)
     plans = [plan_figure(f, args.scale, Path(args.out), args.seeds) for f in figs]
+    records = Path(args.records) if args.records else Path(args.out) / "records"
+    for p in plans:
+        p.records = records
     jobs = args.jobs or os.cpu_count() or 1
     if args.dry_run:
         print_dry_run(plans, jobs)
         return 0
     if args.no_run:
         for p in plans:
-            missing = [pt.name for pt, st in zip(p.points, p.states()) if st != "done"]
+            missing = [pt.name for pt, st in zip(p.points, p.states()) if st not in FINISHED]
             if missing:
                 raise FigureError(f"figures {p.figure.name} --no-run: {len(missing)} of {len(p.points)} runs not "
                                   f"finished in {p.root} ({missing[0]}{', ...' if len(missing) > 1 else ''}); run "
@@ -79,8 +86,11 @@ def cmd_figures(args, options: dict) -> int:
         if rc == EXIT_INTERRUPTED:
             return rc
     from .compose import compose_figure
+    from .records import save_records
     for p in plans:
-        if any(st != "done" for st in p.states()):          # a failed run: the other figures are still made
+        for path in save_records(p, records):
+            print(f"kept {path}")
+        if any(st not in FINISHED for st in p.states()):    # a failed run: the other figures are still made
             print(f"taichimyxo: {p.figure.name} not composed: not all of its runs finished", file=sys.stderr)
             continue
         for path in compose_figure(p, Path(args.out)):
@@ -99,14 +109,14 @@ def print_dry_run(plans: list, jobs: int) -> None:
         total += hours
         cells = sorted({pt.scene.n_cells for pt in p.points})
         w, h = p.points[0].scene.box
-        todo = [s for s, st in zip(secs, p.states()) if st != "done"]
+        todo = [s for s, st in zip(secs, p.states()) if st not in FINISHED]
         est = f", about {duration(sum(s for s in todo if s))} of run time left" if None not in secs else ""
         print(f"{p.figure.name} ({p.scale_name}, {w:g} x {h:g} µm, {'/'.join(map(str, cells))} cells): "
               f"{len(p.points)} runs x {len(p.sweep.seeds)} seed{'s' if len(p.sweep.seeds) > 1 else ''}, "
               f"{hours:g} simulated hours{est}; {p.figure.scenes}; in {p.root}")
         for pt, st, s in zip(p.points, p.states(), secs):
             print(f"  {st:<11} {pt.name:<34} {pt.scene.hours:g} h  {'~' + duration(s) if s else ''}")
-            if st != "done" and s:
+            if st not in FINISHED and s:
                 all_secs.append(s)
     runs = sum(len(p.points) for p in plans)
     if not bench_rates():
@@ -133,16 +143,20 @@ def run_all(plans: list, executor: str, jobs: int | None, options: dict) -> int:
     jobs = jobs or getattr(ex, "DEFAULT_JOBS", None) or os.cpu_count() or 1
     for p in plans:
         check_output_dir(str(p.root))
-    dirs, sizes = [], {}
+    dirs, sizes, recorded = [], {}, set()
     for p in plans:
         p.sweep = load_sweep(write_sweep_file(p))       # the run folders name the sweep file beside them
-        for pt in p.points:
+        for pt, st in zip(p.points, p.states()):
+            if st == "recorded":                        # finished elsewhere: its record stands for it
+                recorded.add(pt.dir_name)
+                continue
             d = str(prepare(pt, p.root, p.sweep))
             dirs.append(d)
             sizes[d] = pt.scene.steps * pt.scene.n_cells
     todo = sorted((d for d in dirs if _state(d) != "done"), key=lambda d: -sizes[d])    # longest first
     names = "+".join(p.figure.name for p in plans)
-    progress = SweepProgress(names, total=len(dirs), skipped=len(dirs) - len(todo), jobs=jobs)
+    progress = SweepProgress(names, total=len(dirs) + len(recorded), skipped=len(dirs) + len(recorded) - len(todo),
+                             jobs=jobs)
     progress.tick()
     try:
         results = ex.execute(todo, jobs, opts, progress) if todo else {}

@@ -92,6 +92,16 @@ def caption_text(runs, frames: dict, notes: list[str]) -> str:
     return " ".join(parts + notes)
 
 
+def _source(runs, pt) -> str | None:
+    """Where a panel's frame comes from: the run's trajectory, or its record."""
+    if pt is None:
+        return None
+    if runs.trajectory(pt).is_file() or runs.records is None:
+        return str(runs.trajectory(pt))
+    from .records import record_path
+    return str(record_path(runs.records, runs, pt))
+
+
 def compose_figure(runs, out: Path) -> list[Path]:
     """Draw the figure from its runs' trajectories into OUT (figure_files); with the stiffness series for S2 Fig
     and S3 Fig. Returns the files written."""
@@ -127,7 +137,7 @@ def compose_figure(runs, out: Path) -> list[Path]:
         ax.text(-0.02, 1.03, panel.letter, transform=ax.transAxes, fontsize=14, fontweight="bold", va="bottom",
                 ha="right")
         pt = runs.first_seed_point(panel.match)
-        frame = panel_frame(runs.trajectory(pt), panel.frame) if pt is not None else None
+        frame = runs.frame(pt, panel.frame) if pt is not None else None
         frames[panel.letter] = frame.time_s if frame is not None else None
         img = panel_image(frame, panel.color) if frame is not None else None
         if img is None:
@@ -137,7 +147,7 @@ def compose_figure(runs, out: Path) -> list[Path]:
         else:
             ax.imshow(img, extent=(0, box[0], 0, box[1]), interpolation="antialiased")
         drawn.append(dict(letter=panel.letter, label=panel.label, color=panel.color, frame=panel.frame,
-                          run=str(runs.trajectory(pt)) if pt is not None else None,
+                          run=_source(runs, pt),
                           time_s=frame.time_s if frame is not None else None, drawn=img is not None))
         when = format_time(frame.time_s) if frame is not None else ""
         title = f"{panel.label}{',  ' + when if when else ''}"

@@ -6,6 +6,7 @@ runs the same folders, so a figure's runs can be finished either way, and a reru
 from __future__ import annotations
 
 import csv
+import json
 import math
 import re
 import tempfile
@@ -22,6 +23,7 @@ THROUGHPUT_CSV = Path(__file__).resolve().parents[2] / "benchmarks" / "results" 
 # state after 1 simulated hour against its start; docs/performance.md)
 FORMED_STATE_FACTOR = 3.3
 TOP_KEYS = ("seeds", "scale", "box_um", "hours")
+FINISHED = ("done", "recorded")   # a run that completed, here or (its record) elsewhere
 
 
 class FigureError(SceneError):
@@ -36,6 +38,7 @@ class FigureRuns:
     text: str                    # the copy of the sweep file
     sweep: object                # taichimyxo.sweep.Sweep
     points: list                 # taichimyxo.sweep.Point, in the sweep's order
+    records: Path | None = None  # where finished runs are kept as records (taichimyxo.figures.records)
 
     def run_dir(self, point) -> Path:
         return point.run_dir(self.root)
@@ -43,8 +46,41 @@ class FigureRuns:
     def trajectory(self, point) -> Path:
         return self.run_dir(point) / f"{point.scene.name}.gsd"
 
+    def run_state(self, point) -> str:
+        return state(self.run_dir(point))
+
+    def record(self, point):
+        """The run's record (taichimyxo.figures.records.Record), or None."""
+        from .records import Record, record_path
+        path = record_path(self.records, self, point) if self.records is not None else None
+        return Record(path) if path is not None and path.is_file() else None
+
     def states(self) -> list[str]:
-        return [state(self.run_dir(p)) for p in self.points]
+        """Each run's state (taichimyxo.sweep.rundir.state), "recorded" where only its record is left."""
+        out = []
+        for p in self.points:
+            st = self.run_state(p)
+            if st != "done" and self.record(p) is not None:
+                st = "recorded"
+            out.append(st)
+        return out
+
+    def frame(self, point, which: str):
+        """The first or last Frame of the run: from its trajectory, else from its record (None: neither)."""
+        from .compose import panel_frame
+        fr = panel_frame(self.trajectory(point), which)
+        if fr is None:
+            rec = self.record(point)
+            fr = rec.frame(which) if rec is not None else None
+        return fr
+
+    def analysis(self, point) -> dict | None:
+        """The run's analysis summary: the JSON beside its trajectory, else its record's."""
+        path = self.trajectory(point).with_suffix(".analysis.json")
+        if self.run_state(point) == "done" and path.is_file():
+            return json.loads(path.read_text())
+        rec = self.record(point)
+        return rec.analysis if rec is not None else None
 
     def first_seed_point(self, match: dict):
         """The point of the figure's first seed whose swept values include `match`."""

@@ -4,24 +4,25 @@ statements on stiffness as claims rows (taichimyxo.analysis.stiffness measures a
 from __future__ import annotations
 
 import csv
-import json
 from pathlib import Path
 
 from ..analysis.stiffness import MEASURES, STIFFNESS, run_measures, series, stiffness_rows
+from .plan import FINISHED
 
 KIND = {"S2Fig": "non-guided", "S3Fig": "active"}
 
 
 def records(runs) -> list[dict]:
-    """One record per finished run of a stiffness figure (its analysis JSON beside the trajectory)."""
+    """One record per finished run of a stiffness figure (its analysis JSON beside the trajectory or in its kept
+    record, taichimyxo.figures.records)."""
     out = []
     kind = KIND[runs.figure.name]
     for p, st in zip(runs.points, runs.states()):
-        path = runs.trajectory(p).with_suffix(".analysis.json")
-        if st != "done" or not path.is_file():
+        analysis = runs.analysis(p) if st in FINISHED else None
+        if analysis is None:
             continue
         out.append(dict(kind=kind, k_a=float(p.scene.raw["cell"]["k_a_N_m"]), seed=p.seed,
-                        measures=run_measures(json.loads(path.read_text()))))
+                        measures=run_measures(analysis)))
     return out
 
 
@@ -36,6 +37,7 @@ def _both(runs) -> list[dict]:
                            scale=runs.sweep.scale or 1.0, hours=runs.sweep.hours, min_cells=1)
     except FigureError:
         return recs
+    plan.records = runs.records
     return recs + records(plan)
 
 

@@ -1,0 +1,113 @@
+"""A finished figure run kept as a record: what the figure needs of it, small enough to commit.
+
+A figure's runs last hours, and their folders (trajectory, checkpoint) are tens of megabytes; a figure needs of each
+run only the frames its panels show (the last; the first for a panel of the start) and its analysis summary (the
+stiffness series' measures). `figures` writes one record per finished run, ``RECORDS/NAME.SCALE/<run folder>.npz``
+(about 60 KB for 500 cells), and composes from the record where the run's folder is gone, so a figure whose runs
+finished on several machines, or in several sessions of one that was wiped in between, is still composed from all
+of them (docs/figures.md, "Records"). The record's name carries the run folder's key, the hash of the resolved
+scene: a record of other physics never stands in for a run."""
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..frame import Frame
+
+RECORD_VERSION = 1
+
+
+def record_dir(records: Path, runs) -> Path:
+    return Path(records) / f"{runs.figure.name}.{runs.scale_name}"
+
+
+def record_path(records: Path, runs, point) -> Path:
+    return record_dir(records, runs) / f"{point.dir_name}.npz"
+
+
+def _frame_arrays(prefix: str, fr: Frame) -> dict:
+    out = {f"{prefix}_positions": fr.positions.astype(np.float32),
+           f"{prefix}_engine_direction": np.asarray(fr.engine_direction, np.int8),
+           f"{prefix}_speed": np.asarray(fr.particle_speed, np.float32),
+           f"{prefix}_scalars": np.array([fr.time_s, fr.step, fr.box[0], fr.box[1], fr.width_um], np.float64)}
+    if fr.segment_strain is not None:
+        out[f"{prefix}_strain"] = np.asarray(fr.segment_strain, np.float32)
+    return out
+
+
+def _frame(z, prefix: str, meta: dict) -> Frame:
+    t, step, lx, ly, width = (float(v) for v in z[f"{prefix}_scalars"])
+    strain = z[f"{prefix}_strain"].astype(np.float64) if f"{prefix}_strain" in z else None
+    return Frame(time_s=t, step=int(step), box=(lx, ly), width_um=width,
+                 positions=z[f"{prefix}_positions"].astype(np.float64),
+                 engine_direction=z[f"{prefix}_engine_direction"], particle_speed=z[f"{prefix}_speed"],
+                 segment_strain=strain, meta=meta)
+
+
+def write_record(path: Path, trajectory: Path, analysis: Path | None, summary: Path | None,
+                 first: bool) -> Path:
+    """The record of one finished run: its last frame (and first, when a panel shows the start), its analysis
+    summary and run summary as JSON text. Written to a temporary name and renamed: never half a record."""
+    from .compose import panel_frame
+    arrays = _frame_arrays("last", panel_frame(trajectory, "last"))
+    if first:
+        arrays.update(_frame_arrays("first", panel_frame(trajectory, "first")))
+    fr = panel_frame(trajectory, "last")
+    texts = {"meta": json.dumps(fr.meta, default=str)}
+    for key, p in (("analysis", analysis), ("summary", summary)):
+        if p is not None and p.is_file():
+            texts[key] = p.read_text()
+    for k, v in texts.items():
+        arrays[f"{k}_json"] = np.frombuffer(v.encode(), np.uint8)
+    arrays["version"] = np.array(RECORD_VERSION)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp.npz")
+    np.savez_compressed(tmp, **arrays)
+    os.replace(tmp, path)
+    return path
+
+
+class Record:
+    """A record read back: frame("first" | "last") -> Frame or None, analysis and summary dicts or None."""
+
+    def __init__(self, path: Path):
+        self.path = Path(path)
+        with np.load(self.path) as z:
+            self._z = {k: z[k] for k in z.files}
+        self.meta = self._json("meta") or {}
+
+    def _json(self, key: str):
+        a = self._z.get(f"{key}_json")
+        return None if a is None else json.loads(a.tobytes().decode())
+
+    @property
+    def analysis(self) -> dict | None:
+        return self._json("analysis")
+
+    @property
+    def summary(self) -> dict | None:
+        return self._json("summary")
+
+    def frame(self, which: str) -> Frame | None:
+        return _frame(self._z, which, self.meta) if f"{which}_scalars" in self._z else None
+
+
+def save_records(runs, records: Path) -> list[Path]:
+    """A record of every finished run of the figure that has none (or an older one than its trajectory)."""
+    written = []
+    first_needed = {tuple(sorted(p.match.items())) for p in runs.figure.panels if p.frame == "first"}
+    for pt in runs.points:
+        traj = runs.trajectory(pt)
+        if runs.run_state(pt) != "done" or not traj.is_file():
+            continue
+        path = record_path(records, runs, pt)
+        if path.is_file() and path.stat().st_mtime >= traj.stat().st_mtime:
+            continue
+        first = pt.seed == runs.sweep.seeds[0] and any(
+            runs.first_seed_point(dict(m)) is pt for m in first_needed)
+        written.append(write_record(path, traj, traj.with_suffix(".analysis.json"), traj.with_suffix(".json"),
+                                    first))
+    return written
