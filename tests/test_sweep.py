@@ -95,6 +95,26 @@ def test_stiffness_sweep_is_the_s2_and_s3_fig_series_at_half_scale():
         assert p.scene.n_cells == 500                                          # the paper's density on 100 x 100
 
 
+def test_a_grid_of_scenes_runs_each_scene_with_its_own_values(tmp_path, capsys):
+    """[grid] scene sweeps base scenes: Fig 2's runs are S1-S4 themselves at the figure's scale, S3 at its own
+    4 ms step, so each run is the scene (the same fingerprint) a video can be rendered from."""
+    from taichimyxo.sweep import load_sweep
+    f = tmp_path / "fig2.toml"
+    f.write_text((REPO / "sweeps" / "figures" / "Fig2.toml").read_text().replace("seeds = 1", "seeds = 1\nscale = 0.5"))
+    pts = load_sweep(f).points()
+    assert [p.name for p in pts] == [f"scene=S{i}_seed=1" for i in range(1, 5)]
+    for i, p in enumerate(pts, 1):
+        ref = Scene.load(f"S{i}", {"domain": {"width_um": 100.0, "height_um": 100.0}})
+        assert p.scene.fingerprint() == ref.fingerprint(), p.name
+    assert [p.scene.dt for p in pts] == [0.002, 0.002, 0.004, 0.002]
+    bad = tmp_path / "bad.toml"
+    bad.write_text('hours = 0.001\n[grid]\nscene = ["S1", "S99"]\n')
+    line = error_line(capsys, main(["sweep", str(bad), "--out", str(tmp_path / "o")]))
+    assert "scene = 'S99'" in line and not (tmp_path / "o").exists()
+    bad.write_text('scene = "S1"\nhours = 0.001\n[grid]\nscene = ["S1", "S3"]\n')
+    assert "scene and [grid] scene both given" in error_line(capsys, main(["sweep", str(bad)]))
+
+
 @pytest.mark.parametrize("grid,extra,says", [
     ("cell.k_a_nm = [1e-17]", "", "[grid] cell.k_a_nm: unknown key"),
     ("cell.k_a_N_m = []", "", "[grid] cell.k_a_N_m = []: an empty list gives no points"),

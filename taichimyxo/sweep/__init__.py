@@ -27,7 +27,9 @@ The sweep file (TOML; examples in sweeps/ of the clone):
 
     [slurm]                     # the options of --executor slurm (taichimyxo.sweep.slurm); [local]: threads = 1
 
-Keys are the scene keys of `python -m taichimyxo keys`, by their dotted names. A point is named by its values
+Keys are the scene keys of `python -m taichimyxo keys`, by their dotted names, and `scene`: `[grid] scene = ["S1",
+"S3"]` (instead of the top-level `scene`) sweeps base scenes, each with its own values (its step, its guiding), the
+box scaled from each one's. A point is named by its values
 (`cell.k_a_N_m=1e-17_guiding.kind=active_seed=2`) and keyed by a hash of its resolved scene; it runs in
 OUT/runs/NAME-KEY/ (default OUT: sweeps-results/NAME in the current folder), a self-contained folder
 (taichimyxo.sweep.runner lists its files). Running the same file again skips the finished runs and resumes the

@@ -73,15 +73,17 @@ class Sweep:
         """Every combination of the grid's values with every seed, resolved and validated (SweepError at the first
         bad point). Points differing in a value are different runs even where the scene's fingerprint would not
         tell them apart (a duplicate combination is refused)."""
-        base = self._base_scene()
-        sized = self._sized(base)
+        bases = {name: self._base_scene(name) for name in self.grid.get("scene", [self.base])}
         out, seen = [], {}
         combos = itertools.product(*self.grid.values()) if self.grid else [()]
         for values in combos:
             over = dict(zip(self.grid, values))
+            base_name = over.get("scene", self.base)
+            base = bases[base_name]
+            sized = self._sized(base)
             for seed in self.seeds:
                 name = point_name(over, seed)
-                scene = self._resolve(base, sized, over, seed, name)
+                scene = self._resolve(base_name, sized, over, seed, name)
                 p = Point(name=name, overrides=over, seed=seed, scene=scene)
                 if p.key in seen:
                     raise SweepError(f"{self.path}: point {name} resolves to the same scene as {seen[p.key]}")
@@ -90,11 +92,11 @@ class Sweep:
         return out
 
     # ---- resolving a point
-    def _base_scene(self) -> Scene:
+    def _base_scene(self, name: str) -> Scene:
         try:
-            return Scene.load(self.base)
+            return Scene.load(name)
         except SceneError as e:
-            raise SweepError(f"{self.path}: scene = {self.base!r}: {e}") from None
+            raise SweepError(f"{self.path}: scene = {name!r}: {e}") from None
 
     def _sized(self, base: Scene) -> dict:
         """scale / box_um as overrides of the base scene: the box's sides, and an explicit cell count with the area
@@ -109,10 +111,10 @@ class Sweep:
             out["population.cells"] = max(1, round(cells * (w * h) / (w0 * h0)))
         return out
 
-    def _resolve(self, base: Scene, sized: dict, over: dict, seed: int, name: str) -> Scene:
+    def _resolve(self, base: str, sized: dict, over: dict, seed: int, name: str) -> Scene:
         # later wins: the box's scaling, then [set], then the point's values, then seed and hours, so a value the
         # file gives is used as given, never scaled
-        flat = {**sized, **self.fixed, **over, "run.seed": seed}
+        flat = {**sized, **self.fixed, **{k: v for k, v in over.items() if k != "scene"}, "run.seed": seed}
         if self.hours is not None:
             flat["run.hours"] = self.hours
         flat["output.movie"] = self.outputs["movie"]
@@ -123,7 +125,7 @@ class Sweep:
             sec, k = key.split(".")
             nested.setdefault(sec, {})[k] = val
         try:
-            scene = Scene.load(self.base, nested)
+            scene = Scene.load(base, nested)
             from ..stability import check_step
             check_step(scene, force=self.force)
             from ..resources import check_resources
@@ -170,6 +172,8 @@ def _flatten(table: dict, where: str, path: Path) -> dict:
         else:
             out[k] = v
     for key in out:
+        if key == "scene" and where == "grid":
+            continue                        # base scenes, checked by load_sweep
         sec, _, k = key.partition(".")
         if sec not in SCHEMA or k not in SCHEMA[sec]:
             raise SweepError(f"{path}: [{where}] {key}: unknown key; see `python -m taichimyxo keys`")
@@ -226,6 +230,13 @@ def _outputs(table, path: Path) -> dict:
     return out
 
 
+def _scene_path(base: str, path: Path) -> str:
+    """A scene as a sweep file names it: a name as `list` shows it, or a .toml path relative to the file."""
+    if base.endswith(".toml") or "/" in base:
+        return str((path.parent / base).resolve()) if not Path(base).is_absolute() else base
+    return base
+
+
 def load_sweep(path) -> Sweep:
     """Read and check a sweep file (its format: taichimyxo/sweep/__init__.py). The points are resolved and validated
     by Sweep.points()."""
@@ -246,13 +257,20 @@ def load_sweep(path) -> Sweep:
         elif k not in TOP_KEYS:
             raise SweepError(f"{path}: unknown key {k!r}; allowed: {', '.join(TOP_KEYS)} and the tables "
                              f"[{'], ['.join(TABLES + EXECUTOR_TABLES)}]")
+    grid = _flatten(data.get("grid", {}), "grid", path)
+    if "scene" in grid:
+        scenes = grid["scene"]
+        if not isinstance(scenes, list) or not scenes or not all(isinstance(x, str) for x in scenes):
+            raise SweepError(f"{path}: [grid] scene = {toml_value(scenes)}: expected a list of scene names, e.g. "
+                             f"[\"S1\", \"S3\"]")
+        grid["scene"] = [_scene_path(x, path) for x in scenes]
+        if "scene" in data:
+            raise SweepError(f"{path}: scene and [grid] scene both given; keep one")
+        data = {**data, "scene": grid["scene"][0]}
     if "scene" not in data or not isinstance(data["scene"], str):
         raise SweepError(f"{path}: scene: name the base scene, e.g. scene = \"S1\" (a name as `list` shows it, or "
-                         f"a .toml path relative to the sweep file)")
-    base = data["scene"]
-    if base.endswith(".toml") or "/" in base:
-        base = str((path.parent / base).resolve()) if not Path(base).is_absolute() else base
-    grid = _flatten(data.get("grid", {}), "grid", path)
+                         f"a .toml path relative to the sweep file), or several in [grid] scene = [...]")
+    base = _scene_path(data["scene"], path)
     for key, vals in grid.items():
         if not isinstance(vals, list):
             raise SweepError(f"{path}: [grid] {key} = {toml_value(vals)}: expected a list of values (a fixed value "
@@ -283,10 +301,13 @@ def load_sweep(path) -> Sweep:
     name = data.get("name", path.stem)
     if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9._+-]+", name):
         raise SweepError(f"{path}: name = {name!r}: letters, digits and . _ + - only (it names files)")
-    try:
-        base_seed = Scene.load(base).seed
-    except SceneError as e:
-        raise SweepError(f"{path}: scene = {data['scene']!r}: {e}") from None
+    seeds_of = {}
+    for b in grid.get("scene", [base]):
+        try:
+            seeds_of[b] = Scene.load(b).seed
+        except SceneError as e:
+            raise SweepError(f"{path}: scene = {b!r}: {e}") from None
+    base_seed = seeds_of[base]
     return Sweep(path=path, name=name, base=base, grid=grid, fixed=fixed, seeds=_seeds(data, path, base_seed),
                  hours=hours, scale=scale, box_um=box, force=force, outputs=_outputs(data.get("outputs", {}), path),
                  executor_options={k: dict(data[k]) for k in EXECUTOR_TABLES if k in data},
