@@ -42,9 +42,7 @@ def scaled_scene(name: str, area: float = 1.0, run: dict | None = None):
     if area != 1.0:
         sc0 = Scene.load(name)
         s = area ** 0.5
-        over["domain"] = {"width_um": sc0.box[0] * s, "height_um": sc0.box[1] * s}
-        if sc0.raw["population"]["cells"]:
-            over["population"] = {"cells": max(1, round(sc0.n_cells * area))}
+        over.update(sc0.resized(sc0.box[0] * s, sc0.box[1] * s))
     if run:
         over["run"] = dict(run)
     return Scene.load(name, over)

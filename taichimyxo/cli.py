@@ -119,6 +119,11 @@ def _build_parser() -> argparse.ArgumentParser:
     v.add_argument("--only", help="comma-separated scene names as `list` shows them, e.g. S3,S8,S2FigA")
     v.add_argument("--out", default="videos")
     v.add_argument("--arch", default="cpu", choices=ARCHES)
+    v.add_argument("--scale", default="paper", choices=["paper", "half", "quarter"],
+                   help="the box's sides x 1, 1/2 or 1/4, cells with the area (videos named NAME-half, ...)")
+    v.add_argument("--from", dest="sources", action="append", default=[], metavar="DIR",
+                   help="render a video from a finished run of its scene found in DIR's folders (e.g. the "
+                        "figures' runs) instead of simulating it again; repeatable")
     executor_arguments(v, "videos at a time (default 1: one after another, as before)")
 
     w = sub.add_parser("sweep", help="a grid of scene keys x seeds from a sweep file, in parallel here or on a "
@@ -298,7 +303,8 @@ def cmd_videos(args) -> int:
     from .videos import regenerate
     jobs = args.jobs or (1 if args.executor == "local" else 0)     # 0: the executor's default
     return regenerate(preview=args.preview, only=args.only, out_dir=args.out, arch=args.arch,
-                      executor=args.executor, jobs=jobs, options=executor_options(args))
+                      executor=args.executor, jobs=jobs, options=executor_options(args), scale=args.scale,
+                      sources=args.sources)
 
 
 def cmd_bench(args) -> int:

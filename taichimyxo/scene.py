@@ -77,6 +77,17 @@ class Scene:
         sc.validate()
         return sc
 
+    def resized(self, width_um: float, height_um: float) -> dict:
+        """The overrides that give this scene a width_um x height_um box at the same density: the sides, and an
+        explicit cell count scaled with the area (a density keeps itself). Sweeps' `scale`, `figures --scale`,
+        `videos --scale` and the benchmarks size boxes this one way, so the same box is the same scene."""
+        w0, h0 = self.box
+        out = {"domain": {"width_um": float(width_um), "height_um": float(height_um)}}
+        cells = self.raw["population"]["cells"]
+        if cells:
+            out["population"] = {"cells": max(1, round(cells * (width_um * height_um) / (w0 * h0)))}
+        return out
+
     def with_overrides(self, overrides: dict) -> "Scene":
         raw = copy.deepcopy(self.raw)
         merge(raw, overrides, "override")

@@ -46,13 +46,14 @@ def check_output_dir(out_dir: str) -> Path:
     return check_out_folder(out_dir)
 
 
-def find_reusable_trajectory(scene: Scene, out: Path) -> tuple[Path, int] | None:
-    """A completed trajectory of the same physics, seed and at least the same length in `out` (e.g. S3's for S8):
-    rendering it needs no simulation. Strain must have been logged if the scene colours by strain, and the
-    scene's movie frames must fall on the trajectory's frames. Returns (path, every k-th frame to render)."""
+def find_reusable_trajectory(scene: Scene, out: Path, recursive: bool = False) -> tuple[Path, int] | None:
+    """A completed trajectory of the same physics, seed and at least the same length in `out` (e.g. S3's for S8;
+    recursive: in any folder below it, e.g. a sweep's or the figures' runs): rendering it needs no simulation.
+    Strain must have been logged if the scene colours by strain, and the scene's movie frames must fall on the
+    trajectory's frames. Returns (path, every k-th frame to render)."""
     fp = scene.fingerprint()
     movie_s = scene.frame_every_steps * scene.dt
-    for js in sorted(out.glob("*.json")):
+    for js in sorted(out.rglob("*.json") if recursive else out.glob("*.json")):
         try:
             d = json.loads(js.read_text())
         except (OSError, ValueError):
@@ -69,8 +70,8 @@ def find_reusable_trajectory(scene: Scene, out: Path) -> tuple[Path, int] | None
         ratio = movie_s / traj_s if traj_s else 0.0
         if ratio < 1 - 1e-9 or abs(ratio - round(ratio)) > 1e-6:
             continue
-        g = out / d.get("files", {}).get("gsd", "")
-        if g.is_file():
+        g = js.parent / d.get("files", {}).get("gsd", "")
+        if g.is_file() and g.suffix == ".gsd":
             return g, int(round(ratio))
     return None
 
@@ -205,7 +206,8 @@ def render_only(scene: Scene, gsd: Path, out: Path, progress: bool = True, every
                           title=scene.name)
     summary = {"summary_version": SUMMARY_VERSION, "scene": scene.name, "seed": scene.seed,
                "fingerprint": scene.fingerprint(), "completed": True, "status": "rendered from trajectory",
-               "source_trajectory": gsd.name, "frames": n, "wall_seconds": time.perf_counter() - t0,
+               "source_trajectory": gsd.name if gsd.parent == out else str(gsd),
+               "frames": n, "wall_seconds": time.perf_counter() - t0,
                "files": {"mp4": files["mp4"].name, "png": files["png"].name}}
     files["json"].write_text(json.dumps(summary, indent=1))
     return summary

@@ -6,6 +6,11 @@ per process: Taichi compiles per instance), skips those whose outputs are up to 
 completed), resumes an interrupted one from its checkpoint, and shows overall progress. Ctrl-C stops after closing
 the current run's files; run again to continue.
 
+--scale half|quarter makes the videos on a box with sides scaled by 1/2 or 1/4 (cells with the area), named
+NAME-half / NAME-quarter. --from DIR (repeatable) looks through DIR's folders for finished runs of a video's scene
+(the same physics and seed, at least as long, frames on the movie's frames: e.g. `figures --scale half`'s runs for
+`videos --scale half`) and renders the movie from that run's trajectory instead of simulating it again.
+
 With --jobs N (N > 1) or --executor slurm the videos run in parallel through a sweep executor
 (taichimyxo.sweep.orchestrator): each video gets a run folder OUT/.jobs/NAME/ (its resolved scene, its log, its result)
 and writes its files into OUT as before; a video that can be rendered from another's trajectory (S8 from S3) waits
@@ -40,10 +45,47 @@ def _up_to_date(sc: Scene, out: Path) -> bool:
     return d.get("simulated_seconds", 0.0) + sc.dt >= sc.hours * 3600
 
 
+SCALES = {"paper": 1.0, "half": 0.5, "quarter": 0.25}     # as `figures --scale` and sweeps' `scale` size boxes
+
+
+def video_scene(name: str, preview: bool = False, scale: str = "paper") -> Scene:
+    """The scene of one video: its own, its --preview, or its box scaled (NAME-half, NAME-quarter: the same scene
+    as a sweep's or `figures`' run at that scale, so a finished run of it can be rendered instead)."""
+    sc = Scene.load(name, {}, preview=preview)
+    if scale == "paper":
+        return sc
+    f = SCALES[scale]
+    return Scene.load(name, {**sc.resized(sc.box[0] * f, sc.box[1] * f), "scene": {"name": f"{sc.name}-{scale}"}})
+
+
+def render_finished(todo: list, out: Path, sources: list[Path]) -> list:
+    """Render each video whose scene a finished run in `sources` (searched through, e.g. figures' or a sweep's
+    run folders) already simulated; returns the videos still to make."""
+    from .scene_run import find_reusable_trajectory, render_only
+    left = []
+    for name, sc in todo:
+        found = next((f for f in (find_reusable_trajectory(sc, d, recursive=True) for d in sources) if f), None)
+        if found is None:
+            left.append((name, sc))
+            continue
+        print(f"videos: {sc.name} rendered from the finished run {found[0]}", flush=True)
+        render_only(sc, found[0], out, every=found[1])
+    return left
+
+
 def regenerate(preview: bool = False, only: str | None = None, out_dir: str = "videos", arch: str = "cpu",
-               executor: str = "local", jobs: int = 1, options: dict | None = None) -> int:
+               executor: str = "local", jobs: int = 1, options: dict | None = None, scale: str = "paper",
+               sources: list | None = None) -> int:
     """Make the videos (module docstring); executor, jobs, options: in parallel through a sweep executor
-    (taichimyxo.sweep.orchestrator) when jobs > 1 or executor is not local, with its options (e.g. Slurm's)."""
+    (taichimyxo.sweep.orchestrator) when jobs > 1 or executor is not local, with its options (e.g. Slurm's).
+    scale: paper, half or quarter (video_scene); sources: folders whose finished runs are rendered rather than
+    simulated again."""
+    if preview and scale != "paper":
+        raise SceneError(f"videos: --preview and --scale {scale} together; a preview has its own size, keep one")
+    sources = [Path(d) for d in (sources or [])]
+    for d in sources:
+        if not d.is_dir():
+            raise SceneError(f"videos --from {d}: no such folder")
     names = VIDEO_SCENES
     if only:
         # any scene `list` shows (the supplementary videos S1-S17 and the figure panels such as S2FigA)
@@ -62,10 +104,16 @@ def regenerate(preview: bool = False, only: str | None = None, out_dir: str = "v
         jobs = jobs or getattr(ex, "DEFAULT_JOBS", None) or os.cpu_count() or 1    # 0: the executor's default
     from .scene_run import check_output_dir
     out = check_output_dir(out_dir)
-    scenes = [(n, Scene.load(n, {}, preview=preview)) for n in names]      # validate all before running any
+    scenes = [(n, video_scene(n, preview, scale)) for n in names]      # validate all before running any
     todo = [(n, sc) for n, sc in scenes if not _up_to_date(sc, out)]
     print(f"videos: {len(scenes) - len(todo)} of {len(scenes)} up to date in {out}; {len(todo)} to make",
           flush=True)
+    if sources:
+        todo = render_finished(todo, out, sources)
+    if ex is None and scale != "paper" and todo:
+        # a scaled scene runs from its resolved scene file, as the executor writes one
+        from .sweep.orchestrator import executor_module
+        ex, opts = executor_module("local"), {}
     if ex is not None:
         return in_parallel([sc for _, sc in todo], out, arch, ex, jobs, opts)
     t0 = time.time()

@@ -248,3 +248,42 @@ def test_stiffness_statements_judged_and_not_measurable():
     assert rows["stiffness_aggregates_larger_fewer"]["status"].startswith("not measurable here: runs of 10 simulated")
     assert rows["stiffness_very_rigid_none"]["status"].startswith("not measurable here: needs active runs at "
                                                                   "k_a = 1e-15")
+
+
+# ------------------------------------------------------------------------------------------------ videos from runs
+def test_every_panel_run_is_its_scene():
+    """Each panel's run is the scene `list` names for it (the same fingerprint: physics, step, seed), so the run is
+    that supplementary video at the figure's scale."""
+    from taichimyxo.figures.specs import _scene_of
+    from taichimyxo.scene import Scene
+    for fig in FIGURES.values():
+        runs = plan_figure(fig, "paper", "unused")
+        for panel in fig.panels:
+            name = _scene_of(fig, panel)
+            if name:
+                assert runs.first_seed_point(panel.match).scene.fingerprint() == Scene.load(name).fingerprint(), \
+                    (fig.name, panel.letter, name)
+
+
+def test_videos_render_a_finished_run_instead_of_simulating_it(tmp_path, capsys):
+    """`videos --scale half --from DIR` finds a finished run of S1 at half scale below DIR and renders its movie from
+    that trajectory: no simulation. A preview with a scale, or a missing folder, is one line, exit 2."""
+    from taichimyxo.videos import video_scene
+    sc = video_scene("S1", scale="half")
+    assert sc.name == "S1-half" and sc.box == (100.0, 100.0) and sc.n_cells == 500
+    run = tmp_path / "figs" / "Fig2" / "runs" / "scene=S1_seed=1-abc"
+    run.mkdir(parents=True)
+    write_synthetic(str(run / "scene=S1_seed=1.gsd"), v_b=V_B, box=sc.box, n_frames=3, gas=30, seed=1)
+    (run / "scene=S1_seed=1.json").write_text(json.dumps(
+        {"fingerprint": sc.fingerprint(), "completed": True, "simulated_seconds": sc.hours * 3600,
+         "trajectory_interval_s": sc.frame_every_steps * sc.dt, "files": {"gsd": "scene=S1_seed=1.gsd"}}))
+    out = tmp_path / "vids"
+    assert main(["videos", "--only", "S1", "--scale", "half", "--from", str(tmp_path / "figs"),
+                 "--out", str(out)]) == 0
+    done = json.loads((out / "S1-half.json").read_text())
+    assert done["status"] == "rendered from trajectory" and done["frames"] == 3
+    assert (out / "S1-half.mp4").stat().st_size > 0 and "rendered from the finished run" in capsys.readouterr().out
+    for argv, says in ((["--preview", "--scale", "half"], "--preview and --scale half together"),
+                       (["--from", str(tmp_path / "nowhere")], "no such folder")):
+        assert says in error_line(capsys, main(["videos", "--only", "S1", *argv, "--out", str(tmp_path / "o")]))
+    assert not (tmp_path / "o").exists()

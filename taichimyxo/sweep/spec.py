@@ -104,12 +104,8 @@ class Sweep:
         if self.scale is None and self.box_um is None:
             return {}
         w0, h0 = base.box
-        w, h = (w0 * self.scale, h0 * self.scale) if self.scale is not None else self.box_um
-        out = {"domain.width_um": float(w), "domain.height_um": float(h)}
-        cells = base.raw["population"]["cells"]
-        if cells:
-            out["population.cells"] = max(1, round(cells * (w * h) / (w0 * h0)))
-        return out
+        nested = base.resized(*((w0 * self.scale, h0 * self.scale) if self.scale is not None else self.box_um))
+        return {f"{sec}.{k}": v for sec, body in nested.items() for k, v in body.items()}
 
     def _resolve(self, base: str, sized: dict, over: dict, seed: int, name: str) -> Scene:
         # later wins: the box's scaling, then [set], then the point's values, then seed and hours, so a value the
