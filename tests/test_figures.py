@@ -287,3 +287,29 @@ def test_videos_render_a_finished_run_instead_of_simulating_it(tmp_path, capsys)
                        (["--from", str(tmp_path / "nowhere")], "no such folder")):
         assert says in error_line(capsys, main(["videos", "--only", "S1", *argv, "--out", str(tmp_path / "o")]))
     assert not (tmp_path / "o").exists()
+
+
+# ------------------------------------------------------------------------------------------------ spiral (S6 Fig)
+def test_spiral_statement_judged_on_rigid_and_flexible_runs():
+    """Rigid spirals keep a larger share in their largest aggregate than flexible ones, whose aggregates split:
+    consistent; the other way round: not consistent; without a flexible run, or shorter than an hour: not
+    measurable here. A spiral start is its own kind of run, not a random start's active following."""
+    from taichimyxo.analysis.claim_runs import run_kind
+    from taichimyxo.analysis.spiral import spiral_measures, spiral_row
+    assert run_kind({"population": {"start": "spiral"}, "guiding": {"kind": "active"}}) == "spiral"
+
+    def summary(n_agg, largest, minutes=360):
+        t = list(range(0, minutes + 1, 30))
+        return {"timeseries": {"time_min": t, "n_aggregates": [n_agg] * len(t)},
+                "tracks": [{"series": {"time_min": t, "n_cells": [largest] * len(t)}}]}
+
+    m = spiral_measures(summary(3, 40), 125)
+    assert m == {"n_aggregates": 3.0, "largest_fraction": 0.32, "hours": 6.0}
+    def rec(lab, ka, n, big, mins=360):
+        return dict(label=lab, k_a=ka, measures=spiral_measures(summary(n, big, mins), 125))
+
+    assert spiral_row([rec("S9", 1e-16, 1, 110), rec("S10", 1e-17, 4, 40)])["status"] == "consistent"
+    assert spiral_row([rec("S9", 1e-16, 3, 40), rec("S10", 1e-17, 1, 110)])["status"] == "not consistent"
+    assert spiral_row([rec("S9", 1e-16, 1, 110)])["status"].startswith("not measurable here")
+    assert spiral_row([rec("S9", 1e-16, 1, 110, 30), rec("S10", 1e-17, 4, 40, 30)])["status"].startswith(
+        "not measurable here")

@@ -18,11 +18,15 @@ KINDS = {  # kind -> (label, the scene to run for it)
     "active": ("active following", "S3 (guiding.kind = active)"),
     "adhesion": ("adhesion", "S4 (guiding.kind = adhesion)"),
     "slime": ("slime trails", "S16 or S17 (slime.enabled = true)"),
+    "spiral": ("spiral start", "S9 or S10 (population.start = spiral)"),
 }
 
 
 def run_kind(scene: dict) -> str:
-    """The guiding of a stored scene: slime (slime trails on), else guiding.kind (none -> non-guided)."""
+    """The guiding of a stored scene: slime (slime trails on), else guiding.kind (none -> non-guided); a run that
+    started as a prearranged spiral is its own experiment (S6 Fig), not a random start's."""
+    if (scene.get("population") or {}).get("start") == "spiral":
+        return "spiral"
     if (scene.get("slime") or {}).get("enabled"):
         return "slime"
     k = str((scene.get("guiding") or {}).get("kind", "none"))

@@ -45,6 +45,8 @@ below 8 frames), "± SE over tracks" over aggregates followed in time:
    stiffness_very_rigid_none: the paper's four statements on bending stiffness over runs at several k_a
    (taichimyxo/analysis/stiffness.py says how each is judged); "not measurable here" without runs at the
    stiffnesses a statement compares, or with runs shorter than an hour.
+15. spiral_stability: prearranged spiral aggregates (S9, S10: their own kind of run, "spiral start"): the largest
+   aggregate's share of the cells and aggregates per frame at the end, rigid against flexible (spiral.py).
 A claim the runs given cannot support (too short, too small) says "not measurable here" and why, not a verdict.
 """
 from __future__ import annotations
@@ -70,6 +72,7 @@ from .claim_runs import (
     stable_tracks,
 )
 from .claims_table import COLUMNS, format_claims, to_csv, to_markdown, write_complete  # noqa: F401
+from .spiral import spiral_measures, spiral_row
 from .stats import series_mean_se
 from .stiffness import records_from_runs, stiffness_rows
 from .summary import json_clean
@@ -355,6 +358,19 @@ def stiffness(runs, shared):
     """The paper's four statements on bending stiffness (stiffness.py), over the runs' k_a: four rows."""
     return [dict(r, runs="; ".join(_describe(x) for x in runs if x["kind"] in ("non-guided", "active")) or "none",
                  plot=None) for r in stiffness_rows(records_from_runs(runs))]
+
+
+@claim("spiral_stability")
+def spiral_stability(runs, shared):
+    """Prearranged spiral aggregates: rigid cells keep theirs, flexible cells' split (spiral.py)."""
+    rs = runs_of(runs, "spiral")
+    recs = [dict(label=r["label"], k_a=float(r["scene"]["cell"]["k_a_N_m"]),
+                 measures=spiral_measures(r["summary"], r["summary"]["meta"]["n_cells"])) for r in rs]
+    row = spiral_row(recs)
+    return _row("spiral_stability", "Prearranged spiral aggregates against stiffness",
+                "aggregates of rigid cells stay relatively stable, losing some cells; those of flexible cells split "
+                "into several smaller aggregates and swirling streams (S6 Fig, S9 and S10 Video)", rs,
+                row["measured"], row["status"], row["values"])
 
 
 def evaluate(runs: list[dict]) -> list[dict]:
