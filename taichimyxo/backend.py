@@ -60,6 +60,11 @@ def ensure(arch: str | None = None, threads: int | None = None, default_fp: str 
     return init(arch or "cpu", threads, default_fp=default_fp)
 
 
+def threads() -> int | None:
+    """The CPU threads Taichi runs with (None before it starts)."""
+    return _state["threads"]
+
+
 def reset() -> None:
     ti.reset()
     _state.update(arch=None, threads=None, fp=None)

@@ -28,6 +28,7 @@ import math
 import os
 from pathlib import Path
 
+from .backend import threads as backend_threads
 from .run_loop import InvariantBroken
 from .status_line import Progress
 from .triggers import WallClock
@@ -273,6 +274,14 @@ def previous_sessions(path: Path, scene) -> dict:
             "sessions": int(d.get("sessions", 1))}
 
 
+def _load_average() -> float | None:
+    """The machine's 1-minute load average when the summary is written: a rate is only comparable at a like load."""
+    try:
+        return round(os.getloadavg()[0], 2)
+    except OSError:
+        return None
+
+
 class Summary(Writer):
     """The JSON run summary, written when the run ends (any status). files: the outputs to list (name -> Path);
     checkpoint: the checkpoint's path, listed when the run did not complete; resumed: this session continued an
@@ -314,7 +323,8 @@ def run_summary(run, path: Path, files: dict, checkpoint, resumed: bool, setup_s
         "particle_steps_per_second": run.steps_done * sim.n_p / max(wall, 1e-9),
         "frame_interval_s": scene.frame_every_steps * scene.dt,
         "trajectory_interval_s": scene.trajectory_every_steps * scene.dt,
-        "neighbour_rebuilds": sim.rebuilds, "arch": arch, "precision": scene.precision,
+        "neighbour_rebuilds": sim.rebuilds, "arch": arch, "cpu_threads": backend_threads(),
+        "load_average": _load_average(), "precision": scene.precision,
         "integrator": scene.integrator, "strain_logged": scene.strain,
         "files": {k: Path(v).name for k, v in files.items()},
         # run.dt_ms as the run used it (0 in a scene file means the integrator's default)
