@@ -313,3 +313,26 @@ def test_spiral_statement_judged_on_rigid_and_flexible_runs():
     assert spiral_row([rec("S9", 1e-16, 1, 110)])["status"].startswith("not measurable here")
     assert spiral_row([rec("S9", 1e-16, 1, 110, 30), rec("S10", 1e-17, 4, 40, 30)])["status"].startswith(
         "not measurable here")
+
+
+def test_dry_run_estimates_from_finished_runs_when_kept(tmp_path, capsys):
+    """A finished one-thread run kept as a record gives the estimate for runs of its kind of scene: its whole run's
+    particle-steps per second, formed states included, instead of the start-state benchmark x a factor."""
+    from taichimyxo.figures.plan import bench_rates, measured_rates, run_seconds
+    from taichimyxo.figures.records import record_path, write_record
+    out, records = tmp_path / "figs", tmp_path / "kept"
+    runs = plan_figure(FIGURES["S6Fig"], "half", out)
+    _fake_finished_runs(runs, gas=30, seed=1)
+    pt = runs.points[0]
+    sc = pt.scene
+    summary = runs.trajectory(pt).with_suffix(".json")
+    summary.write_text(json.dumps({"completed": True, "cpu_threads": 1, "steps": sc.steps, "particles": 1000,
+                                   "wall_seconds_total": sc.steps * 1000 / 2e6, "scene_values": sc.to_dict()}))
+    write_record(record_path(records, runs, pt), runs.trajectory(pt), None, summary, first=False)
+    measured = measured_rates(records)
+    assert list(measured.values()) == [[(1000, 2e6)]]
+    other = runs.points[1].scene
+    assert run_seconds(other, bench_rates(), measured) == other.steps * other.n_cells * other.N / 2e6
+    assert main(["figures", "S6Fig", "--scale", "half", "--out", str(out), "--records", str(records),
+                 "--dry-run"]) == 0
+    assert "the particle-steps/s of the 1 finished run kept in" in capsys.readouterr().out

@@ -70,7 +70,7 @@ def cmd_figures(args, options: dict) -> int:
         p.records = records
     jobs = args.jobs or os.cpu_count() or 1
     if args.dry_run:
-        print_dry_run(plans, jobs)
+        print_dry_run(plans, jobs, records)
         return 0
     if args.no_run:
         for p in plans:
@@ -98,13 +98,13 @@ def cmd_figures(args, options: dict) -> int:
     return rc
 
 
-def print_dry_run(plans: list, jobs: int) -> None:
+def print_dry_run(plans: list, jobs: int, records: Path | None = None) -> None:
     from ..status_line import duration
-    from .plan import bench_rates, makespan, run_seconds
-    rates = bench_rates()
+    from .plan import bench_rates, makespan, measured_rates, run_seconds
+    rates, measured = bench_rates(), measured_rates(records)
     total, all_secs = 0.0, []
     for p in plans:
-        secs = [run_seconds(pt.scene, rates) for pt in p.points]
+        secs = [run_seconds(pt.scene, rates, measured) for pt in p.points]
         hours = sum(pt.scene.hours for pt in p.points)
         total += hours
         cells = sorted({pt.scene.n_cells for pt in p.points})
@@ -119,12 +119,16 @@ def print_dry_run(plans: list, jobs: int) -> None:
             if st not in FINISHED and s:
                 all_secs.append(s)
     runs = sum(len(p.points) for p in plans)
-    if not bench_rates():
+    if not rates and not measured:
         print(f"total: {runs} runs, {total:g} simulated hours; no benchmark table to estimate the wall time from")
         return
+    done = sum(len(v) for v in measured.values())
+    bench = ("the benchmark's particle-steps/s for the kind of scene (benchmarks/results/throughput.csv) x the cost "
+             "of a formed state")
+    source = (f"the particle-steps/s of the {done} finished run{'s' if done != 1 else ''} kept in {records}, for "
+              f"the same kind of scene, else {bench}") if done else bench
     print(f"total: {runs} runs, {total:g} simulated hours; estimated wall time on this machine with {jobs} at a time "
-          f"(one thread each): {duration(makespan(all_secs, jobs))} (the benchmark's particle-steps/s for each kind "
-          f"of scene, benchmarks/results/throughput.csv, x the cost of a formed state; taichimyxo/figures/plan.py)")
+          f"(one thread each): {duration(makespan(all_secs, jobs))} ({source}; taichimyxo/figures/plan.py)")
 
 
 def run_all(plans: list, executor: str, jobs: int | None, options: dict) -> int:

@@ -183,15 +183,40 @@ def bench_rates(path: Path = THROUGHPUT_CSV) -> dict:
     return out
 
 
-def run_seconds(scene, rates: dict) -> float | None:
-    """Estimated wall seconds of one run on one thread: its steps x particles at the benchmark's rate for the
-    nearest size of the same kind of scene, times FORMED_STATE_FACTOR; None without a benchmark."""
+def measured_rates(records: Path | None) -> dict:
+    """benchmark scene kind -> [(particles, particle-steps/s)] of finished figure runs kept as records
+    (taichimyxo.figures.records) that ran on one CPU thread: whole runs, formed states included."""
+    out: dict = {}
+    if records is None or not Path(records).is_dir():
+        return out
+    from ..scene import Scene
+    from .records import Record
+    for path in sorted(Path(records).glob("*/*.npz")):
+        try:
+            s = Record(path).summary or {}
+            if s.get("cpu_threads") != 1 or not s.get("completed") or not s.get("wall_seconds_total"):
+                continue
+            scene = Scene.from_dict(s["scene_values"])
+        except (OSError, ValueError, KeyError, SceneError):
+            continue
+        out.setdefault(_bench_scene(scene), []).append(
+            (int(s["particles"]), s["steps"] * s["particles"] / s["wall_seconds_total"]))
+    return out
+
+
+def run_seconds(scene, rates: dict, measured: dict | None = None) -> float | None:
+    """Estimated wall seconds of one run on one thread: its steps x particles at the rate of finished runs of the
+    same kind of scene (`measured`, measured_rates) at the nearest size, else at the benchmark's rate times
+    FORMED_STATE_FACTOR; None without either."""
+    particles = scene.n_cells * scene.N
+    nearest = lambda rows: min(rows, key=lambda r: abs(math.log(r[0] / max(particles, 1))))[1]   # noqa: E731
+    rows = (measured or {}).get(_bench_scene(scene))
+    if rows:
+        return scene.steps * particles / nearest(rows)
     rows = rates.get(_bench_scene(scene)) or rates.get("S3")
     if not rows:
         return None
-    particles = scene.n_cells * scene.N
-    _, rate = min(rows, key=lambda r: abs(math.log(r[0] / max(particles, 1))))
-    return scene.steps * particles / rate * FORMED_STATE_FACTOR
+    return scene.steps * particles / nearest(rows) * FORMED_STATE_FACTOR
 
 
 def makespan(seconds: list[float], jobs: int) -> float:
