@@ -108,6 +108,7 @@ def regenerate(preview: bool = False, only: str | None = None, out_dir: str = "v
     todo = [(n, sc) for n, sc in scenes if not _up_to_date(sc, out)]
     print(f"videos: {len(scenes) - len(todo)} of {len(scenes)} up to date in {out}; {len(todo)} to make",
           flush=True)
+    t0 = time.time()
     if sources:
         todo = render_finished(todo, out, sources)
     if ex is None and scale != "paper" and todo:
@@ -116,7 +117,6 @@ def regenerate(preview: bool = False, only: str | None = None, out_dir: str = "v
         ex, opts = executor_module("local"), {}
     if ex is not None:
         return in_parallel([sc for _, sc in todo], out, arch, ex, jobs, opts)
-    t0 = time.time()
     for i, (name, sc) in enumerate(todo, 1):
         cmd = [sys.executable, "-m", "taichimyxo", "scene", name, "--out", str(out), "--arch", arch]
         if preview:

@@ -13,6 +13,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -22,6 +23,7 @@ from taichimyxo.figures.plan import plan_figure
 from taichimyxo.figures.specs import FIGURES
 
 V_B = 4.0
+REPO = Path(__file__).resolve().parent.parent
 
 
 def error_line(capsys, rc) -> str:
@@ -114,7 +116,8 @@ def test_records_compose_a_figure_whose_run_folders_are_gone(tmp_path, capsys):
     assert main([*args, "--no-run"]) == 0
     after = json.loads((out / "Fig3.half.json").read_text())
     assert [(p["drawn"], p["time_s"]) for p in after["panels"]] == [(p["drawn"], p["time_s"]) for p in before["panels"]]
-    assert all(p["run"].endswith(".npz") for p in after["panels"])
+    assert all(p["run"].startswith("record: Fig3.half/") and p["run"].endswith(".npz") for p in after["panels"])
+    assert all(p["run"].startswith("Fig3/runs/") for p in before["panels"])     # no machine's paths
     runs.records = records
     assert runs.states() == ["recorded", "recorded"]
     assert main(args) == 0                               # nothing left to run: the records stand for the runs
@@ -336,3 +339,16 @@ def test_dry_run_estimates_from_finished_runs_when_kept(tmp_path, capsys):
     assert main(["figures", "S6Fig", "--scale", "half", "--out", str(out), "--records", str(records),
                  "--dry-run"]) == 0
     assert "the particle-steps/s of the 1 finished run kept in" in capsys.readouterr().out
+
+
+def test_the_committed_records_compose_their_figure(tmp_path):
+    """The runs this project made and kept in docs/figures/records compose their figure on a machine without the
+    runs (as a user's checkout is): every panel drawn, from the records."""
+    records = REPO / "docs" / "figures" / "records"
+    made = sorted({p.parent.name.split(".")[0] for p in records.glob("*/*.npz")})
+    assert made, "no committed records"
+    for name in made:
+        assert main(["figures", name, "--scale", "half", "--no-run", "--records", str(records),
+                     "--out", str(tmp_path)]) == 0
+        doc = json.loads((tmp_path / f"{name}.half.json").read_text())
+        assert all(p["drawn"] and p["run"].startswith("record: ") for p in doc["panels"]), name

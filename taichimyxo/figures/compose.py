@@ -1,10 +1,12 @@
 """A figure as one composite image: its panels (the first or last frame of its runs, drawn by the movies' renderer
 without decorations), each with its letter and label, one colour bar per colouring shown (speed; strain energy where
 a panel shows it, as the paper's Fig 2 and Fig 4), the panels' time, one scale bar and the caption, which says the
-scale, the runs and what the figure cannot show at that scale. PNG, and PDF for print."""
+scale, the runs and what the figure cannot show at that scale. PNG, and PDF for print; beside it the claims table
+measured on the figure's runs (the stiffness figures: the stiffness series, taichimyxo.figures.stiffness)."""
 from __future__ import annotations
 
 import json
+import os
 import textwrap
 from pathlib import Path
 
@@ -92,14 +94,15 @@ def caption_text(runs, frames: dict, notes: list[str]) -> str:
     return " ".join(parts + notes)
 
 
-def _source(runs, pt) -> str | None:
-    """Where a panel's frame comes from: the run's trajectory, or its record."""
+def _source(runs, pt, out: Path) -> str | None:
+    """Where a panel's frame comes from, never a machine's path: the run's trajectory relative to the figure's folder,
+    or its record relative to the records' folder ("record: NAME.SCALE/<run>.npz")."""
     if pt is None:
         return None
     if runs.trajectory(pt).is_file() or runs.records is None:
-        return str(runs.trajectory(pt))
-    from .records import record_path
-    return str(record_path(runs.records, runs, pt))
+        return os.path.relpath(runs.trajectory(pt), out)
+    from .records import record_dir, record_path
+    return "record: " + os.path.relpath(record_path(runs.records, runs, pt), record_dir(runs.records, runs).parent)
 
 
 def compose_figure(runs, out: Path) -> list[Path]:
@@ -147,7 +150,7 @@ def compose_figure(runs, out: Path) -> list[Path]:
         else:
             ax.imshow(img, extent=(0, box[0], 0, box[1]), interpolation="antialiased")
         drawn.append(dict(letter=panel.letter, label=panel.label, color=panel.color, frame=panel.frame,
-                          run=_source(runs, pt),
+                          run=_source(runs, pt, Path(out)),
                           time_s=frame.time_s if frame is not None else None, drawn=img is not None))
         when = format_time(frame.time_s) if frame is not None else ""
         title = f"{panel.label}{',  ' + when if when else ''}"
@@ -168,9 +171,23 @@ def compose_figure(runs, out: Path) -> list[Path]:
     plt.close(fig)
     files["json"].write_text(json.dumps(dict(figure=fig_spec.name, title=fig_spec.title, scale=runs.scale_name,
                                              box_um=list(box), seeds=runs.sweep.seeds, panels=drawn, caption=text,
-                                             sweep=str(runs.root / "sweep.toml")), indent=1))
+                                             sweep=os.path.relpath(runs.root / "sweep.toml", out)), indent=1))
     written = list(files.values())
     if fig_spec.stiffness:
         from .stiffness import write_stiffness
         written += write_stiffness(runs, out)
+    else:
+        written += write_claims(runs, out)
     return written
+
+
+def write_claims(runs, out: Path) -> list[Path]:
+    """The claims table (taichimyxo.analysis.claims) over the figure's runs, in OUT/NAME[.SCALE].claims/: what the
+    paper says of the runs the figure shows, measured on them. Needs their trajectories: with a run kept only as a
+    record, nothing is written (the table made where the runs finished stands)."""
+    from ..analysis.claims import claims
+    paths = [runs.trajectory(pt) for pt in runs.points]
+    if not all(p.is_file() for p in paths):
+        return []
+    folder = Path(out) / f"{figure_files(runs, out)['png'].stem}.claims"
+    return [Path(f) for f in claims([str(p) for p in paths], out_dir=str(folder))["files"]]

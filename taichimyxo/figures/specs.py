@@ -107,8 +107,9 @@ FIGURES = {f.name: f for f in (
            "A: start; B: S9; C: S10",
            "(A) Initial configuration: cells head to tail on a spiral. (B) Rigid cells at 6 h. (C) Flexible cells "
            "at 6 h.",
-           {"half": "At half scale the spiral holds a quarter of the scenes' 500 cells: a smaller aggregate than "
-                    "the paper's, which flexible cells may keep whole where the paper's split."}),
+           {"half": "At half scale the spiral holds a quarter of the scenes' 500 cells in a 50 µm periodic box, "
+                    "10 cell lengths: a smaller aggregate than the paper's, and a stream leaving it can close on "
+                    "itself across the box's edges instead of rejoining an aggregate."}),
 )}
 
 # the scene of `list` each panel's run reproduces (same physics; the figure's sweep sets strain logging and scale)
