@@ -78,15 +78,12 @@ class Scene:
         return sc
 
     def resized(self, width_um: float, height_um: float) -> dict:
-        """The overrides that give this scene a width_um x height_um box at the same density: the sides, and an
-        explicit cell count scaled with the area (a density keeps itself). Sweeps' `scale`, `figures --scale`,
-        `videos --scale` and the benchmarks size boxes this one way, so the same box is the same scene."""
-        w0, h0 = self.box
+        """Overrides for a width_um x height_um box at this density (an explicit cell count with the area): sweeps,
+        figures, videos and benchmarks size boxes this one way, so the same box is the same scene."""
+        (w0, h0), cells = self.box, self.raw["population"]["cells"]
         out = {"domain": {"width_um": float(width_um), "height_um": float(height_um)}}
-        cells = self.raw["population"]["cells"]
-        if cells:
-            out["population"] = {"cells": max(1, round(cells * (width_um * height_um) / (w0 * h0)))}
-        return out
+        return {**out, "population": {"cells": max(1, round(cells * (width_um * height_um) / (w0 * h0)))}} \
+            if cells else out
 
     def with_overrides(self, overrides: dict) -> "Scene":
         raw = copy.deepcopy(self.raw)
@@ -189,18 +186,13 @@ class Scene:
 
     @property
     def n_cells(self) -> int:
-        c = self.raw["population"]["cells"]
-        if c:
-            return int(c)
-        Lx, Ly = self.box
-        per_um2 = self.raw["population"]["density_cells_per_cm2"] * 1e-8
-        return int(round(per_um2 * Lx * Ly))
+        c, (Lx, Ly) = self.raw["population"]["cells"], self.box
+        return int(c) if c else int(round(self.raw["population"]["density_cells_per_cm2"] * 1e-8 * Lx * Ly))
 
     @property
     def area_fraction(self) -> float:
         """n L W / box area: 0.125 at the paper's low density, 1.0 at its high density."""
-        Lx, Ly = self.box
-        return self.n_cells * self.length * self.width / (Lx * Ly)
+        return self.n_cells * self.length * self.width / (self.box[0] * self.box[1])
 
     @property
     def N(self) -> int:
@@ -380,9 +372,7 @@ class Scene:
     def dt(self) -> float:
         """Time step in s; 0 in the file means the integrator's default (see stability.py)."""
         ms = self.raw["run"]["dt_ms"]
-        if ms > 0:
-            return ms * 1e-3
-        return default_dt_ms(self) * 1e-3
+        return (ms if ms > 0 else default_dt_ms(self)) * 1e-3
 
     @property
     def step_control(self) -> str:

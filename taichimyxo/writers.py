@@ -28,7 +28,6 @@ import math
 import os
 from pathlib import Path
 
-from .backend import threads as backend_threads
 from .run_loop import InvariantBroken
 from .status_line import Progress
 from .triggers import WallClock
@@ -302,6 +301,7 @@ class Summary(Writer):
 
 
 def run_summary(run, path: Path, files: dict, checkpoint, resumed: bool, setup_s: float, arch: str) -> dict:
+    from . import backend
     sim = run.sim
     scene = sim.scene
     status, wall = run.status, run.wall_seconds
@@ -323,7 +323,7 @@ def run_summary(run, path: Path, files: dict, checkpoint, resumed: bool, setup_s
         "particle_steps_per_second": run.steps_done * sim.n_p / max(wall, 1e-9),
         "frame_interval_s": scene.frame_every_steps * scene.dt,
         "trajectory_interval_s": scene.trajectory_every_steps * scene.dt,
-        "neighbour_rebuilds": sim.rebuilds, "arch": arch, "cpu_threads": backend_threads(),
+        "neighbour_rebuilds": sim.rebuilds, "arch": arch, "cpu_threads": backend.threads(),
         "load_average": _load_average(), "precision": scene.precision,
         "integrator": scene.integrator, "strain_logged": scene.strain,
         "files": {k: Path(v).name for k, v in files.items()},

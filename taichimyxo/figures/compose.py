@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .records import panel_frame  # noqa: F401  (composites draw a trajectory's first or last frame)
+
 PANEL_PX = 900               # the largest side of a panel's rendering, px
 PANEL_IN = 3.2               # a panel's width in the composite, inches
 TITLE_CHARS = 44             # a panel title's line at 9 pt fits the panel's width
@@ -23,17 +25,6 @@ def figure_files(runs, out: Path) -> dict:
     OUT/NAME.SCALE.png / .pdf / .json otherwise."""
     stem = runs.figure.name if runs.scale_name == "paper" else f"{runs.figure.name}.{runs.scale_name}"
     return {k: Path(out) / f"{stem}.{k}" for k in ("png", "pdf", "json")}
-
-
-def panel_frame(path: Path, which: str):
-    """The first or last Frame of a trajectory (None when it is missing or empty)."""
-    from ..trajectory import count_frames, read_frames
-    if not path.is_file():
-        return None
-    n = count_frames(str(path))
-    if n == 0:
-        return None
-    return next(read_frames(str(path), start=0 if which == "first" else n - 1), None)
 
 
 def panel_image(frame, color: str):

@@ -67,7 +67,7 @@ class FigureRuns:
 
     def frame(self, point, which: str):
         """The first or last Frame of the run: from its trajectory, else from its record (None: neither)."""
-        from .compose import panel_frame
+        from .records import panel_frame
         fr = panel_frame(self.trajectory(point), which)
         if fr is None:
             rec = self.record(point)

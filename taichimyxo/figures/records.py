@@ -28,6 +28,17 @@ def record_path(records: Path, runs, point) -> Path:
     return record_dir(records, runs) / f"{point.dir_name}.npz"
 
 
+def panel_frame(path: Path, which: str):
+    """The first or last Frame of a trajectory (None when it is missing or empty)."""
+    from ..trajectory import count_frames, read_frames
+    if not path.is_file():
+        return None
+    n = count_frames(str(path))
+    if n == 0:
+        return None
+    return next(read_frames(str(path), start=0 if which == "first" else n - 1), None)
+
+
 def _frame_arrays(prefix: str, fr: Frame) -> dict:
     out = {f"{prefix}_positions": fr.positions.astype(np.float32),
            f"{prefix}_engine_direction": np.asarray(fr.engine_direction, np.int8),
@@ -51,7 +62,6 @@ def write_record(path: Path, trajectory: Path, analysis: Path | None, summary: P
                  first: bool) -> Path:
     """The record of one finished run: its last frame (and first, when a panel shows the start), its analysis
     summary and run summary as JSON text. Written to a temporary name and renamed: never half a record."""
-    from .compose import panel_frame
     arrays = _frame_arrays("last", panel_frame(trajectory, "last"))
     if first:
         arrays.update(_frame_arrays("first", panel_frame(trajectory, "first")))
