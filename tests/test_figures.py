@@ -344,10 +344,16 @@ def test_dry_run_estimates_from_finished_runs_when_kept(tmp_path, capsys):
 def test_the_committed_records_compose_their_figure(tmp_path):
     """The runs this project made and kept in docs/figures/records compose their figure on a machine without the
     runs (as a user's checkout is): every panel drawn, from the records."""
+    from taichimyxo.figures.records import Record
     records = REPO / "docs" / "figures" / "records"
-    made = sorted({p.parent.name.split(".")[0] for p in records.glob("*/*.npz")})
-    assert made, "no committed records"
-    for name in made:
+    kept = sorted(records.glob("*/*.npz"))
+    assert kept, "no committed records"
+    assert all(Record(k).frame("last") is not None for k in kept)          # a figure's runs may still be running
+    for name in sorted({k.parent.name.split(".")[0] for k in kept}):
+        runs = plan_figure(FIGURES[name], "half", tmp_path)
+        runs.records = records
+        if any(st != "recorded" for st in runs.states()):
+            continue
         assert main(["figures", name, "--scale", "half", "--no-run", "--records", str(records),
                      "--out", str(tmp_path)]) == 0
         doc = json.loads((tmp_path / f"{name}.half.json").read_text())
