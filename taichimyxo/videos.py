@@ -45,15 +45,13 @@ def _up_to_date(sc: Scene, out: Path) -> bool:
     return d.get("simulated_seconds", 0.0) + sc.dt >= sc.hours * 3600
 
 
-SCALES = {"paper": 1.0, "half": 0.5, "quarter": 0.25}     # as `figures --scale` and sweeps' `scale` size boxes
-
-
 def video_scene(name: str, preview: bool = False, scale: str = "paper") -> Scene:
     """The scene of one video: its own, its --preview, or its box scaled (NAME-half, NAME-quarter: the same scene
     as a sweep's or `figures`' run at that scale, so a finished run of it can be rendered instead)."""
     sc = Scene.load(name, {}, preview=preview)
     if scale == "paper":
         return sc
+    from .figures.specs import SCALES  # one set of scales: `figures --scale` sizes its runs' boxes alike
     f = SCALES[scale]
     return Scene.load(name, {**sc.resized(sc.box[0] * f, sc.box[1] * f), "scene": {"name": f"{sc.name}-{scale}"}})
 

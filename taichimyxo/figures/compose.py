@@ -12,8 +12,6 @@ from pathlib import Path
 
 import numpy as np
 
-from .records import panel_frame  # noqa: F401  (composites draw a trajectory's first or last frame)
-
 PANEL_PX = 900               # the largest side of a panel's rendering, px
 PANEL_IN = 3.2               # a panel's width in the composite, inches
 TITLE_CHARS = 44             # a panel title's line at 9 pt fits the panel's width

@@ -49,18 +49,24 @@ class FigureRuns:
     def run_state(self, point) -> str:
         return state(self.run_dir(point))
 
-    def record(self, point):
-        """The run's record (taichimyxo.figures.records.Record), or None."""
-        from .records import Record, record_path
+    def record_file(self, point) -> Path | None:
+        """The run's record file (taichimyxo.figures.records) where there is one."""
+        from .records import record_path
         path = record_path(self.records, self, point) if self.records is not None else None
-        return Record(path) if path is not None and path.is_file() else None
+        return path if path is not None and path.is_file() else None
+
+    def record(self, point):
+        """The run's record read back (taichimyxo.figures.records.Record), or None."""
+        from .records import Record
+        path = self.record_file(point)
+        return Record(path) if path is not None else None
 
     def states(self) -> list[str]:
         """Each run's state (taichimyxo.sweep.rundir.state), "recorded" where only its record is left."""
         out = []
         for p in self.points:
             st = self.run_state(p)
-            if st != "done" and self.record(p) is not None:
+            if st != "done" and self.record_file(p) is not None:
                 st = "recorded"
             out.append(st)
         return out

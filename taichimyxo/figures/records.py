@@ -62,11 +62,11 @@ def write_record(path: Path, trajectory: Path, analysis: Path | None, summary: P
                  first: bool) -> Path:
     """The record of one finished run: its last frame (and first, when a panel shows the start), its analysis
     summary and run summary as JSON text. Written to a temporary name and renamed: never half a record."""
-    arrays = _frame_arrays("last", panel_frame(trajectory, "last"))
+    last = panel_frame(trajectory, "last")
+    arrays = _frame_arrays("last", last)
     if first:
         arrays.update(_frame_arrays("first", panel_frame(trajectory, "first")))
-    fr = panel_frame(trajectory, "last")
-    texts = {"meta": json.dumps(fr.meta, default=str)}
+    texts = {"meta": json.dumps(last.meta, default=str)}
     for key, p in (("analysis", analysis), ("summary", summary)):
         if p is not None and p.is_file():
             texts[key] = p.read_text()
