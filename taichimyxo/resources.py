@@ -36,12 +36,14 @@ def _fmt(n: float) -> str:
     return f"{n / 1024:.3g} KiB"
 
 
-def field_sizes(scene, contacts: str = "coupled") -> dict:
+def field_sizes(scene, contacts: str | None = None) -> dict:
     """Name -> (entries, bytes) of every field the scene's Simulation allocates (state.py, neighbours.py, the units
-    of terms/ and the integrator), by the same rules."""
+    of terms/ and the integrator), by the same rules; contacts: the imex option (default: the scene's)."""
     from .launch import shape_for
     from .neighbours import grid_radius
     from .state import list_capacities
+    imex = scene.integrator in ("imex", "imex-explicit")
+    contacts = contacts or ("explicit" if scene.integrator == "imex-explicit" else "coupled")
     n, N = scene.n_cells, scene.N
     P, S, C = n * N, n * (N - 1), n
     pb = 8 if scene.precision in ("f64", "mixed") else 4         # positions
@@ -60,7 +62,7 @@ def field_sizes(scene, contacts: str = "coupled") -> dict:
         g = 2 * C * caps["guiding_capacity"]
         out["guide"] = (g, g * 4)
         out["guide_n"] = (2 * C, 2 * C * 4)
-    if scene.integrator == "imex" and contacts != "explicit":
+    if imex and contacts != "explicit":
         out["fa"] = (S, S * 2 * force_bytes)                                # each segment gathers and records its own
         out["fb"] = (S, S * 2 * force_bytes)
     else:
@@ -83,9 +85,9 @@ def field_sizes(scene, contacts: str = "coupled") -> dict:
         out["slime_claim"] = (g, g * 4)
     if scene.strain:
         out["strain_seg"] = (S, S * 8)
-    if scene.mass > 0 and scene.integrator != "imex":
+    if scene.mass > 0 and not imex:
         out["v"] = (P, P * 2 * force_bytes)
-    if scene.integrator == "imex":
+    if imex:
         from .terms.contacts import Contacts
         bw = min(6, 2 * N)
         out["Lf"] = (2 * P * (bw + 1), 2 * P * (bw + 1) * force_bytes)

@@ -73,8 +73,9 @@ SCHEMA: dict[str, dict[str, tuple]] = {
     "run": {
         "hours": (_F, 6.0, "pos", "simulated time, h"),
         "dt_ms": (_F, 0.0, "nonneg", "time step, ms; 0 = the integrator's default from the accuracy study"),
-        "integrator": (_S, "explicit", ("explicit", "imex"), "explicit: the paper's overdamped Euler step; "
-                       "imex: springs, bending and contacts linearly implicit, contacts coupled by CG"),
+        "integrator": (_S, "explicit", ("explicit", "imex", "imex-explicit"), "explicit: the paper's overdamped "
+                       "Euler step; imex: springs, bending and contacts linearly implicit, contacts coupled by CG; "
+                       "imex-explicit: springs and bending implicit, contacts explicit"),
         "precision": (_S, "mixed", ("f32", "f64", "mixed"), "f32, f64, or mixed (f64 positions, f32 forces)"),
         "seed": (_I, 1, "nonneg", "random seed"),
         "mass_pg": (_F, 0.0, "nonneg", "particle mass for the semi-implicit Euler step, pg; 0 = overdamped"),

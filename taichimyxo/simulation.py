@@ -26,7 +26,7 @@ import taichi as ti
 
 from . import backend
 from .frame import Frame
-from .integrators import make_integrator, needs_rebuild, records_contacts
+from .integrators import imex_options, make_integrator, needs_rebuild, records_contacts
 from .launch import shape_for
 from .model import Model, field_bytes, fields_of
 from .neighbours import NeighbourList, NeighbourOverflow  # noqa: F401  (NeighbourOverflow: API)
@@ -43,6 +43,7 @@ class Simulation:
         loop_shape: "cpu" or "gpu" forces how the kernels launch their loops (taichimyxo/launch.py; default: the
         arch's). integrator_options go to the integrator (imex: contacts = coupled | diagonal | explicit, tol,
         max_iter). Other starts: from_positions, from_checkpoint."""
+        integrator_options = imex_options(scene, integrator_options)      # refused before any field is made
         positions, engine_direction = _start if _start is not None else initial_state(scene)
         self.arch = init_backend(scene, arch, threads)
         self.scene = scene

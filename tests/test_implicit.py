@@ -162,3 +162,29 @@ def test_very_rigid_cells_stable_where_explicit_blows_up(rigid_pair):
         assert np.abs(bend_angles(p[0])).max() < 0.05          # straight (it started at 0.16 rad per joint)
         d = np.linalg.norm(p[0].mean(0) - pos[0].mean(0))
         assert d == pytest.approx(V_B * 5.0, rel=0.1)
+
+
+def test_imex_explicit_is_imex_with_explicit_contacts(pair):
+    """run.integrator = "imex-explicit" (what sweeps and scene files can name) is the imex step with contacts
+    explicit: no contact records, its own stability limits (30 ms at k_c = 0.002 N/m), and a push side-on that
+    moves the cells as the explicit reference does; a contradicting contacts option is refused."""
+    from taichimyxo.integrators import records_contacts
+    from taichimyxo.stability import stable_limit_ms
+    scene = _scene("imex-explicit", 5.0)
+    assert not records_contacts(scene)
+    assert stable_limit_ms(_scene("imex-explicit", 5.0, collisions={"k_c_N_per_m": 0.002})) == 30.0
+    with pytest.raises(ValueError, match="contradicts"):
+        Simulation.from_positions(scene, *_t_push(), contacts="coupled")
+    ex, _ = pair
+    pos, ke = _t_push()
+    ex.set_state(pos, ke)
+    ref = advance_for(ex, 20.0, 0.5)
+    sim = Simulation.from_positions(scene, pos, ke)
+    try:
+        assert sim.integrator.contacts == "explicit"
+        p = advance_for(sim, 20.0, 5.0)
+    finally:
+        sim.close()
+    for c in (0, 1):
+        moved, moved_ref = p[c, :, 0].mean() - pos[c, :, 0].mean(), ref[c, :, 0].mean() - pos[c, :, 0].mean()
+        assert moved == pytest.approx(moved_ref, rel=0.02)
