@@ -23,6 +23,7 @@ bin_start, so the lists are the same on either shape.
 
 import taichi as ti
 
+from .kernel_call import direct
 from .launch import scan_block
 from .state import SEGMENT_LENGTH_TOL, State, closest_points
 
@@ -89,6 +90,7 @@ class NeighbourList:
             self.bin_block = st.scalar(builder, self.n_scan_blocks, ti.i32)
         self.flags = st.scalar(builder, 4, ti.i32)       # indexed by the FLAG_ names above
         self.rebuilds = 0
+        self._launch_build = direct(self._build)          # a build's kernel call without Taichi's Python work
 
     @ti.func
     def seg_distance(self, s, t):
@@ -135,13 +137,18 @@ class NeighbourList:
             f[r, j + 1] = v
 
     @ti.kernel
-    def _build(self):
+    def _build(self) -> ti.i32:
+        """The lists, and what went wrong: bit 0 a contact row overflowed, bit 1 a guiding row, bit 2 a segment was
+        longer than l_max (one value read back, no flag read or written from Python)."""
         st = self.state
         N = ti.static(st.N)
         nbx, nby = ti.static(self.nbx, self.nby)
         cut_c = ti.static(self.contact_cutoff * 1.001)       # a margin far above rounding
         cut_g = ti.static(self.guiding_cutoff * 1.001)
         l_max = ti.static(self.l_max)
+        self.flags[FLAG_CONTACT_OVERFLOW] = 0
+        self.flags[FLAG_GUIDE_OVERFLOW] = 0
+        self.flags[FLAG_LONG_SEGMENT] = 0
         ti.loop_config(**st.loops.items)
         for i in range(nbx * nby):
             self.bin_count[i] = 0
@@ -250,6 +257,8 @@ class NeighbourList:
         for p in range(st.n_p):
             self.x_ref[p] = st.x[p]
         self.flags[FLAG_MOVED] = 0
+        return (self.flags[FLAG_CONTACT_OVERFLOW] + 2 * self.flags[FLAG_GUIDE_OVERFLOW]
+                + 4 * self.flags[FLAG_LONG_SEGMENT])
 
     @ti.func
     def _scan_bins(self):
@@ -281,17 +290,16 @@ class NeighbourList:
                 acc += self.bin_count[i]
 
     def rebuild(self) -> None:
-        self.flags[FLAG_CONTACT_OVERFLOW] = self.flags[FLAG_GUIDE_OVERFLOW] = self.flags[FLAG_LONG_SEGMENT] = 0
-        self._build()
+        broken = self._launch_build()
         self.rebuilds += 1
-        if self.flags[FLAG_CONTACT_OVERFLOW] or self.flags[FLAG_GUIDE_OVERFLOW]:
-            contacts = self.flags[FLAG_CONTACT_OVERFLOW]
+        if broken & 3:
+            contacts = broken & 1
             which = ("segments within W + skin of one segment", self.max_nbrs) if contacts else \
                 ("cell ends within W + d_g + skin of one cell end", self.max_guides)
             raise NeighbourOverflow(
                 f"more than {which[1]} {which[0]}: cells are packed beyond area fraction 1 or blew up; set "
                 f"run.max_neighbours higher or use a smaller time step")
-        if self.flags[FLAG_LONG_SEGMENT]:
+        if broken & 4:
             raise NeighbourOverflow(
                 f"segment lengths above {LENGTH_BOUND:g} l0 outside 1 +- {SEGMENT_LENGTH_TOL} l0 at a neighbour-list "
                 f"build: the chain blew up; use a smaller time step")

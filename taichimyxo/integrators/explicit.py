@@ -6,6 +6,7 @@ chosen by the controller of step_control.py, whose estimate the kernel computes 
 
 import taichi as ti
 
+from ..kernel_call import direct
 from ..neighbours import FLAG_MOVED
 from ..state import perp
 from . import step_code
@@ -24,6 +25,7 @@ class Explicit:
         self.v = state.vec(builder, state.n_p, state.fdt) if self.mass > 0 else None
         self.control = StepControl(scene, state, builder) if scene.step_control == "error" else None
         self.controlled = self.control is not None
+        self._launch_step = direct(self._step)      # a step's kernel call without Taichi's Python work
 
     @ti.kernel
     def _step(self, dt: ti.f64) -> ti.i32:
@@ -69,7 +71,7 @@ class Explicit:
     def step(self, dt: float) -> int:
         """One step of dt s; returns its step_code (integrators/__init__.py): the rebuild flag and, with
         run.step_control = "error", the controller's quantised error ratio (StepControl.took decodes it)."""
-        return self._step(dt)
+        return self._launch_step(dt)
 
     def reset(self, restored: bool = False) -> None:
         """The state was replaced (restored: from a checkpoint, with the controller's history)."""

@@ -52,6 +52,7 @@ import math
 
 import taichi as ti
 
+from ..kernel_call import direct
 from ..launch import scan_block
 from ..neighbours import FLAG_MOVED
 from .banded import BandedCells
@@ -96,6 +97,9 @@ class Imex:
         self.tan = state.vec(builder, P, state.fdt)    # tangents and chain offsets of x_n, for the assembly
         self.xrel = state.vec(builder, P, state.fdt)
         self.coupled = contacts == "coupled"
+        # the step's kernel calls without Taichi's Python work (kernel_call.py)
+        self._launch_begin, self._launch_iterate, self._launch_finish = (
+            direct(self._imex_begin), direct(self._imex_iterate), direct(self._imex_finish))
         if self.coupled:
             self.cg_r, self.cg_u, self.cg_w, self.cg_p, self.cg_s = (dof(2 * P) for _ in range(5))
             self.vprev = dof(2 * P)               # last step's velocities: the first guess
@@ -194,7 +198,7 @@ class Imex:
 
     # ------------------------------------------------------------------ kernels
     @ti.kernel
-    def _imex_begin(self, dt: ti.f64):
+    def _imex_begin(self, dt: ti.f64) -> ti.i32:
         """Forces, per-cell assembly and factorisation. Without coupled contacts the per-cell solve is the whole
         step; with them, the CG start: r = F - A v_prev, u = M^-1 r, w = A u (v_prev: last step's velocities)."""
         C = ti.static(self.state.n_cells)
@@ -260,6 +264,7 @@ class Imex:
                     self.cgi[0] = 1
                 else:
                     self.cgs[3] = gam / dlt
+        return self._code()
 
     @ti.func
     def _reduce(self):
@@ -309,7 +314,7 @@ class Imex:
             self.part[b, 1] = d
 
     @ti.kernel
-    def _imex_iterate(self, dt: ti.f64):
+    def _imex_iterate(self, dt: ti.f64) -> ti.i32:
         """`iters_per_launch` CG iterations (skipped once converged), then the position update if converged."""
         C = ti.static(self.state.n_cells)
         bs = ti.static(self.bs)
@@ -355,6 +360,7 @@ class Imex:
                             self.cgs[3] = gam / den
                             self.cgs[0] = gam
         self._finish(dt)
+        return self._code()
 
     @ti.func
     def _finish(self, dt):
@@ -372,21 +378,27 @@ class Imex:
                 self.cgi[0] = 2
 
     @ti.kernel
-    def _imex_finish(self, dt: ti.f64):
+    def _imex_finish(self, dt: ti.f64) -> ti.i32:
         ti.loop_config(**self.state.loops.one_thread)
         for _ in range(1):
             self.cgi[0] = 1
         self._finish(dt)
+        return self._code()
+
+    @ti.func
+    def _code(self):
+        """What a step's kernel returns: 2 x the CG state (2: converged and moved) + the neighbour-list flag."""
+        return 2 * self.cgi[0] + self.nl.flags[FLAG_MOVED]
 
     def step(self, dt: float) -> int:
         """One linearly implicit step (module docstring). Returns its step code (integrators/__init__.py): with no
         step controller, the neighbour-list flag alone (a particle moved past half the skin)."""
-        self._imex_begin(dt)
+        code = self._launch_begin(dt)
         if self.coupled:
             for _ in range(math.ceil(self.max_iter / self.iters_per_launch) + 1):
-                self._imex_iterate(dt)
-                if self.cgi[0] == 2:
+                code = self._launch_iterate(dt)
+                if code >> 1 == 2:
                     break
             else:
-                self._imex_finish(dt)
-        return self.nl.flags[FLAG_MOVED]
+                code = self._launch_finish(dt)
+        return code & 1
