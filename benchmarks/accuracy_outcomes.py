@@ -38,7 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
-CHECKED = ("n_aggregates", "fraction_in_aggregates", "edge_speed_vb", "speed_p95_vb", "aggregate_cells")
+CHECKED = ("n_aggregates", "fraction_in_aggregates", "edge_speed_vb", "speed_p95_vb", "aggregate_cells",
+           "cluster_cells")
 
 
 def run_outcomes(run_dir: Path) -> dict | None:
@@ -99,7 +100,7 @@ def compare(rows: list[dict], reference: str) -> list[dict]:
                             values=[float(v) for v in vals], ref_min=lo, ref_max=hi,
                             diff_in_ref_sd=(m - float(rv.mean())) / rsd if rsd and rsd > 0 else math.nan,
                             welch_t=(m - float(rv.mean())) / se if se and se > 0 else math.nan,
-                            agrees=None if cost else bool(lo <= m <= hi)))
+                            agrees=None if cost or not len(vals) or not len(rv) else bool(lo <= m <= hi)))
     return out
 
 
@@ -111,6 +112,8 @@ def markdown(cmp: list[dict], reference: str) -> str:
     for c in cmp:
         vals = ", ".join(f"{v:.3g}" for v in c["values"])
         ag = "" if c["agrees"] is None else ("yes" if c["agrees"] else "**no**")
+        if not c["seeds"]:
+            continue                        # an outcome these runs were not measured by (earlier CSVs' rows)
         lines.append(f"| {c['setting']} | {c['outcome']} | {c['mean']:.3g} ± {c['sd']:.2g} ({c['seeds']}) | "
                      f"{vals} | {c['ref_min']:.3g}–{c['ref_max']:.3g} | {c['diff_in_ref_sd']:+.2f} | "
                      f"{c['welch_t']:+.2f} | {ag} |")
@@ -133,6 +136,8 @@ def main(argv=None) -> int:
                     help="add the runs of an earlier accuracy_outcomes.csv (repeatable)")
     ap.add_argument("--reference", default=None, help='the reference setting as JSON (default: the smallest '
                     'first swept value, e.g. {"run.dt_ms": 2})')
+    ap.add_argument("--group", default=None, metavar="KEY", help="compare within each value of a swept KEY (e.g. "
+                    "scene, cell.k_a_N_m), each against its own reference")
     ap.add_argument("--out", default="benchmarks-results")
     a = ap.parse_args(argv)
     for p in a.rows:
@@ -157,18 +162,26 @@ def main(argv=None) -> int:
         return 2
     rows.sort(key=lambda r: (r["setting"], r["seed"]))
     settings = sorted({r["setting"] for r in rows}, key=lambda s: [str(v) for v in json.loads(s).values()])
-    reference = json.dumps(json.loads(a.reference), sort_keys=True) if a.reference else settings[0]
-    if reference not in settings:
-        print(f"accuracy_outcomes: reference {reference} has no finished run (settings: {', '.join(settings)})")
-        return 2
+    groups: dict = {}
+    for st in settings:
+        groups.setdefault(json.loads(st).get(a.group) if a.group else None, []).append(st)
+    references = {}
+    for g, members in groups.items():
+        given = {**json.loads(a.reference), **({a.group: g} if a.group else {})} if a.reference else None
+        references[g] = json.dumps(given, sort_keys=True) if given else members[0]
+        if references[g] not in members:
+            print(f"accuracy_outcomes: reference {references[g]} has no finished run (settings: {', '.join(members)})")
+            return 2
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     with open(out / "accuracy_outcomes.csv", "w", newline="") as f:
         w = csv.DictWriter(f, list(dict.fromkeys(k for r in rows for k in r)))
         w.writeheader()
         w.writerows(rows)
-    cmp = compare(rows, reference)
-    md = markdown(cmp, reference)
+    md = ""
+    for g, members in groups.items():
+        cmp = compare([r for r in rows if r["setting"] in members], references[g])
+        md += ("\n" if md else "") + markdown(cmp, references[g])
     (out / "accuracy_outcomes.md").write_text(md)
     print(md)
     return 0

@@ -71,3 +71,29 @@ def test_accuracy_outcomes_compares_seeds_run_on_different_days_as_one_ensemble(
     assert "agrees with the reference on every outcome" in (out / "accuracy_outcomes.md").read_text()
     assert mod.main(["--rows", str(tmp_path / "missing.csv")]) == 2
     assert "no such file" in capsys.readouterr().out
+
+
+def test_accuracy_outcomes_compares_within_each_group(tmp_path):
+    """--group KEY judges each value of KEY (a scene, a stiffness) against its own reference: a setting that agrees
+    with its own scene's 2 ms runs is not compared with another scene's; an outcome a run was not measured by (older
+    rows without cluster_cells) is left unjudged rather than failed."""
+    mod = _benchmark("accuracy_outcomes")
+    head = ("setting,seed,simulated_h,wall_s,steps,wall_s_per_sim_h,n_aggregates,aggregate_cells,"
+            "fraction_in_aggregates,edge_speed_vb,speed_p95_vb")
+
+    def row(scene, dt, seed, n):
+        setting = '"{""run.dt_ms"": %s, ""scene"": ""%s""}"' % (dt, scene)
+        return f"{setting},{seed},1.0,100.0,1800000,100.0,{n},14,0.5,1.6,1.9"
+    rows = tmp_path / "rows.csv"
+    rows.write_text("\n".join([head] + [row("S1", 2, s, n) for s, n in ((1, 0.1), (2, 0.3))]
+                              + [row("S1", 4, s, n) for s, n in ((1, 0.2), (2, 0.2))]
+                              + [row("S3", 2, s, n) for s, n in ((1, 18), (2, 22))]
+                              + [row("S3", 4, s, n) for s, n in ((1, 19), (2, 21))]) + "\n")
+    out = tmp_path / "out"
+    assert mod.main(["--rows", str(rows), "--group", "scene", "--out", str(out)]) == 0
+    md = (out / "accuracy_outcomes.md").read_text()
+    assert md.count("Reference:") == 2
+    assert md.count("agrees with the reference on every outcome") == 2          # each within its own scene's range
+    assert "cluster_cells" not in md
+    assert mod.main(["--rows", str(rows), "--out", str(out)]) == 0              # one reference: S1 2 ms for all
+    assert "outside the reference's seed range on n_aggregates" in (out / "accuracy_outcomes.md").read_text()

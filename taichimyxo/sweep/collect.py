@@ -15,6 +15,7 @@ settled:
   edge_speed_vb           edge speed of an aggregate / v_b (over aggregate-frames; empty without aggregates)
   speed_p95_vb            95th-percentile cell speed / v_b
   free_cell_speed_vb      mean speed of cells touching no other / v_b
+  cluster_cells           mean size of the cluster a cell is in, cells (touching cells; the non-guided measure)
 """
 from __future__ import annotations
 
@@ -34,13 +35,14 @@ OUTCOMES = {   # name -> label on the plots
     "edge_speed_vb": "edge speed / v_b",
     "speed_p95_vb": "95th-percentile speed / v_b",
     "free_cell_speed_vb": "free-cell speed / v_b",
+    "cluster_cells": "cluster a cell is in (cells)",
 }
 
 
 # the least top of each panel's y axis (every axis starts at 0): a difference smaller than this is noise to the eye
 # too, so a flat outcome stays flat instead of being stretched to fill the panel
 Y_TOP = {"n_aggregates": 2.0, "aggregate_cells": 10.0, "aggregate_radius_um": 5.0, "fraction_in_aggregates": 1.0,
-         "edge_speed_vb": 2.0, "speed_p95_vb": 2.0, "free_cell_speed_vb": 1.2}
+         "edge_speed_vb": 2.0, "speed_p95_vb": 2.0, "free_cell_speed_vb": 1.2, "cluster_cells": 5.0}
 
 
 def _mean(x) -> float | None:
@@ -74,6 +76,7 @@ def outcomes(analysis: dict) -> dict:
             "edge_speed_vb": None if edge_m is None else edge_m / v_b,
             "speed_p95_vb": None if p95 is None else p95 / v_b,
             "free_cell_speed_vb": None if free is None else free / v_b,
+            "cluster_cells": _mean(ts.get("mean_cluster_size_weighted", [])[q0:]),
             "from_min": t_from, "to_min": float(t[-1]), "frames": len(t) - q0}
 
 
