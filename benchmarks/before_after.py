@@ -2,13 +2,15 @@
 scale (benchmarks/states.py) under an earlier commit and under the working tree, alternating, so a machine that
 drifts weighs on both alike.
 
-    python benchmarks/before_after.py --before COMMIT [--rounds 2] [--steps 1500] [--threads 2] [--out DIR]
+    python benchmarks/before_after.py --before COMMIT [--rounds 2] [--steps 1500] [--threads 2] [--scale 1]
+                                      [--out DIR]
 
 The earlier commit is checked out into a temporary git worktree; each measurement is its own process (one
 Simulation per process) through the public API only (Scene.load, Simulation.from_positions, advance, or an earlier
 commit's equivalents), so any commit with that API can be measured. Each side runs at its own S3 default step, and
 the working tree also at `--also-dt-ms` (default 2): the change of code and the change of step are told apart. Writes
-before_after.csv (every round) and prints ms per step and wall seconds per simulated second.
+before_after.csv (every round; before_after_scale<S>_t<N>.csv for another --scale or --threads) and prints ms per
+step and wall seconds per simulated second.
 """
 from __future__ import annotations
 
@@ -31,8 +33,13 @@ z = np.load(sys.argv[4])
 over = {"output": {"movie": False}}
 if dt:
     over["run"] = {"dt_ms": dt}
+scale = float(sys.argv[5])
+if scale < 1:                           # S3's own start in a box scaled by `scale` (the density is kept)
+    over["domain"] = {"width_um": 200.0 * scale, "height_um": 200.0 * scale}
 sc = Scene.load("S3", over)
-if hasattr(Simulation, "from_positions"):
+if scale < 1:
+    sim = Simulation(sc)
+elif hasattr(Simulation, "from_positions"):
     sim = Simulation.from_positions(sc, z["positions"], z["engine_direction"])
 else:                                   # commits before Simulation.from_positions
     sim = Simulation(sc, positions=z["positions"], engine_direction=z["engine_direction"])
@@ -50,9 +57,9 @@ print(json.dumps({"dt_ms": sc.dt * 1e3, "ms_per_step": round(1e3 * w / steps, 3)
 """
 
 
-def measure(tree: Path, dt_ms: float, steps: int, threads: int) -> dict:
+def measure(tree: Path, dt_ms: float, steps: int, threads: int, scale: float = 1.0) -> dict:
     try:
-        return run_in_tree(tree, WORKER, [dt_ms, steps, threads, HERE / "states" / "S3-1h.npz"])
+        return run_in_tree(tree, WORKER, [dt_ms, steps, threads, HERE / "states" / "S3-1h.npz", scale])
     except RuntimeError as e:
         raise SystemExit(f"before_after: {e}") from None
 
@@ -64,6 +71,8 @@ def main() -> None:
     p.add_argument("--steps", type=int, default=1500)
     p.add_argument("--threads", type=int, default=2)
     p.add_argument("--also-dt-ms", type=float, default=2.0, help="the working tree also at this step (0: skip)")
+    p.add_argument("--scale", type=float, default=1.0, help="below 1: S3's start in a box scaled by this (0.5: the "
+                   "figures' half scale) instead of the state after one hour; writes before_after_scale<S>_t<N>.csv")
     a = p.parse_args()
     rows = []
     with worktree(a.before) as old:
@@ -72,7 +81,8 @@ def main() -> None:
             sides.append((f"after at {a.also_dt_ms:g} ms", REPO, a.also_dt_ms))
         for rnd in range(a.rounds):
             for label, tree, dt in sides:
-                r = {"side": label, "round": rnd, **measure(tree, dt, a.steps, a.threads)}
+                r = {"side": label, "round": rnd, "scale": a.scale, "threads": a.threads,
+                     **measure(tree, dt, a.steps, a.threads, a.scale)}
                 rows.append(r)
                 print(f"round {rnd} {label:>16}: {r['dt_ms']:g} ms step, {r['ms_per_step']:.3f} ms/step, "
                       f"{r['wall_s_per_simulated_s']:.3f} wall s per simulated s, "
@@ -80,8 +90,9 @@ def main() -> None:
     print(f"load average (1, 5, 15 min): {[round(x, 2) for x in os.getloadavg()]}")
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    write_csv(out / "before_after.csv", rows)
-    print(f"wrote {out / 'before_after.csv'}")
+    name = "before_after.csv" if (a.scale, a.threads) == (1.0, 2) else f"before_after_scale{a.scale:g}_t{a.threads}.csv"
+    write_csv(out / name, rows)
+    print(f"wrote {out / name}")
 
 
 if __name__ == "__main__":

@@ -10,10 +10,10 @@ and selects the few algorithms that differ with `ti.static(loops.gpu)`; `loops` 
 the Simulation is built, so every choice is made at compile time and a kernel holds one shape only.
 
   cpu  exactly the choices measured on a 2-core CPU (docs/performance.md): Taichi's CPU backend spends ~75 µs
-       launching a parallel loop, so below SERIAL_BELOW_SEGMENTS segments every loop over items runs serially
-       (faster for small systems), above it in parallel; the neighbour grid's prefix sum runs in one thread; the
-       implicit step sums per-block partials of at most 64 blocks. Nothing else is configured: the compiled CPU
-       kernels are those of before this module (the same offline-cache keys, bit-identical runs).
+       launching a parallel loop, so below SERIAL_BELOW_SEGMENTS segments, and at any size when Taichi runs on one
+       thread, every loop over items runs serially, otherwise in parallel; the neighbour grid's prefix sum runs in
+       one thread; the implicit step sums per-block partials of at most 64 blocks (one below SERIAL_BELOW_SEGMENTS,
+       whatever the threads, so one and two threads sum alike). Serial and parallel loops give the same numbers.
   gpu  no loop over items is serialized, blocks of GPU_BLOCK_DIM threads (Taichi's default, not yet tuned on a GPU);
        the grid's prefix sum is a two-level blocked scan (blocks of ~sqrt(bins) bins: block totals in parallel, their
        scan in one thread, each block's own scan in parallel); the implicit step keeps one partial per cell and sums
@@ -56,7 +56,8 @@ def arch_kind() -> str:
 @dataclass(frozen=True)
 class LoopShape:
     kind: str                  # "cpu" | "gpu"
-    serial: bool               # loops over items run in one thread (CPU, small systems)
+    serial: bool               # loops over items run in one thread (CPU: small systems, or Taichi on one thread)
+    small: bool = False        # below SERIAL_BELOW_SEGMENTS: what the implicit step's blocks follow
 
     @property
     def gpu(self) -> bool:
@@ -76,7 +77,7 @@ class LoopShape:
         """Blocks of cells whose partial sums the implicit step reduces in a fixed order."""
         if self.gpu:
             return n_cells
-        return 1 if self.serial else min(n_cells, CPU_MAX_BLOCKS)
+        return 1 if self.small else min(n_cells, CPU_MAX_BLOCKS)      # by size only: 1 and 2 threads sum alike
 
 
 def scan_block(n: int) -> int:
@@ -90,4 +91,7 @@ def shape_for(n_segments: int, kind: str | None = None) -> LoopShape:
     kind = kind or os.environ.get("TAICHIMYXO_LOOP_SHAPE") or arch_kind()
     if kind not in SHAPES:
         raise LoopShapeError(f"loop shape {kind!r}: one of {', '.join(SHAPES)} (TAICHIMYXO_LOOP_SHAPE)")
-    return LoopShape(kind, serial=kind == "cpu" and n_segments < SERIAL_BELOW_SEGMENTS)
+    small = kind == "cpu" and n_segments < SERIAL_BELOW_SEGMENTS
+    # on one thread a parallel loop is the launch cost and nothing gained (docs/performance.md "The step kernel")
+    one_thread = kind == "cpu" and ti.lang.impl.current_cfg().cpu_max_num_threads == 1
+    return LoopShape(kind, serial=small or one_thread, small=small)
