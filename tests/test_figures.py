@@ -41,6 +41,8 @@ def error_line(capsys, rc) -> str:
     (["Fig3", "--scale", "quarter"], "90 cells"),
     (["Fig2", "--scale", "half", "--no-run"], "--no-run: 4 of 4 runs not finished"),
     (["Fig2", "--seeds", "0"], "--seeds 0"),
+    (["Fig2", "--runs", "scene=S9*"], "--runs 'scene=S9*': matches none of the runs (scene=S1_seed=1, "),
+    (["Fig2", "--runs", "scene=S1*", "--no-run"], "--runs and --no-run together"),
     (["Fig2", "--scale", "tiny"], "invalid choice"),
 ])
 def test_bad_input_is_one_line_exit_2_nothing_written(tmp_path, capsys, argv, says):
@@ -62,6 +64,9 @@ def test_dry_run_counts_runs_hours_and_wall_time(tmp_path, capsys):
     assert "S3Fig (half, 100 x 100 µm, 500 cells): 12 runs x 3 seeds, 72 simulated hours" in text
     assert "total: 16 runs, 96 simulated hours; estimated wall time on this machine with 2 at a time" in text
     assert "A: start; B: S1; C: S2; D: S3; E: S4; F: S8" in text          # which scenes each figure comes from
+    assert main(["figures", "S3Fig", "--scale", "half", "--out", str(out), "--dry-run", "--runs", "*FigA_*"]) == 0
+    text = capsys.readouterr().out
+    assert text.count("not chosen") == 9 and "total: 3 of 12 runs chosen, 72 simulated hours" in text
     assert not out.exists()
 
 
@@ -141,6 +146,9 @@ def test_composite_from_tiny_runs_with_stiffness_series(tmp_path):
     runs = plan_figure(FIGURES["S2Fig"], "tiny", tmp_path, seeds=1, scale=0.1, hours=0.001,
                        extra_set={"output.frame_interval_min": 0.01}, min_cells=1)
     assert [p.scene.n_cells for p in runs.points] == [20] * 4
+    first = runs.points[0].name                                          # --runs: part of a figure now
+    assert run_all([runs], "local", 2, {}, chosen={first}) == 0
+    assert runs.states()[0] == "done" and not any(st in ("done", "recorded") for st in runs.states()[1:])
     assert run_all([runs], "local", 2, {}) == 0
     assert all(st == "done" for st in runs.states())
     files = compose_figure(runs, tmp_path)

@@ -36,6 +36,9 @@ def add_parser(sub, executor_arguments) -> None:
     f.add_argument("--dry-run", action="store_true", help="the runs, simulated hours and estimated wall time; "
                                                           "nothing runs or is written")
     f.add_argument("--no-run", action="store_true", help="compose from finished runs only; missing runs are refused")
+    f.add_argument("--runs", metavar="PATTERN", action="append",
+                   help="run only the runs whose name matches (shell pattern, e.g. 'scene=S3FigA_*'; repeatable): "
+                        "part of a figure now, the rest later or elsewhere, the records joining them")
     executor_arguments(f, "runs at a time (default: the number of cores), each on one thread")
     f.set_defaults(figures_main=cmd_figures)        # the CLI dispatches here without importing this module twice
 
@@ -63,14 +66,17 @@ def cmd_figures(args, options: dict) -> int:
                           f"--cpus-per-task)")
     if args.dry_run and args.no_run:
         raise FigureError("figures: --dry-run and --no-run together; keep one")
+    if args.runs and args.no_run:
+        raise FigureError("figures: --runs and --no-run together; --runs chooses what runs")
     figs = resolve_names(args.names)
     plans = [plan_figure(f, args.scale, Path(args.out), args.seeds) for f in figs]
+    chosen = selection(plans, args.runs)
     records = Path(args.records) if args.records else Path(args.out) / "records"
     for p in plans:
         p.records = records
     jobs = args.jobs or os.cpu_count() or 1
     if args.dry_run:
-        print_dry_run(plans, jobs, records)
+        print_dry_run(plans, jobs, records, chosen)
         return 0
     if args.no_run:
         for p in plans:
@@ -82,7 +88,7 @@ def cmd_figures(args, options: dict) -> int:
     rc = 0
     if not args.no_run:
         options = {**options, **({"threads": args.threads} if args.threads else {})}
-        rc = run_all(plans, args.executor, args.jobs, options)
+        rc = run_all(plans, args.executor, args.jobs, options, chosen)
         if rc == EXIT_INTERRUPTED:
             return rc
     from .compose import compose_figure
@@ -98,7 +104,22 @@ def cmd_figures(args, options: dict) -> int:
     return rc
 
 
-def print_dry_run(plans: list, jobs: int, records: Path | None = None) -> None:
+def selection(plans: list, patterns: list[str] | None) -> set | None:
+    """The names of the runs --runs chooses (None: all); a pattern that matches no run is refused."""
+    from fnmatch import fnmatchcase
+
+    from .plan import FigureError
+    if not patterns:
+        return None
+    names = [pt.name for p in plans for pt in p.points]
+    for pat in patterns:
+        if not any(fnmatchcase(n, pat) for n in names):
+            raise FigureError(f"figures --runs {pat!r}: matches none of the runs ({', '.join(sorted(set(names))[:4])}"
+                              f"{', ...' if len(set(names)) > 4 else ''})")
+    return {n for n in names if any(fnmatchcase(n, pat) for pat in patterns)}
+
+
+def print_dry_run(plans: list, jobs: int, records: Path | None = None, chosen: set | None = None) -> None:
     from ..status_line import duration
     from .plan import bench_rates, makespan, measured_rates, run_seconds
     rates, measured = bench_rates(), measured_rates(records)
@@ -109,30 +130,35 @@ def print_dry_run(plans: list, jobs: int, records: Path | None = None) -> None:
         total += hours
         cells = sorted({pt.scene.n_cells for pt in p.points})
         w, h = p.points[0].scene.box
-        todo = [s for s, st in zip(secs, p.states()) if st not in FINISHED]
+        todo = [s for pt, s, st in zip(p.points, secs, p.states())
+                if st not in FINISHED and (chosen is None or pt.name in chosen)]
         est = f", about {duration(sum(s for s in todo if s))} of run time left" if None not in secs else ""
         print(f"{p.figure.name} ({p.scale_name}, {w:g} x {h:g} µm, {'/'.join(map(str, cells))} cells): "
               f"{len(p.points)} runs x {len(p.sweep.seeds)} seed{'s' if len(p.sweep.seeds) > 1 else ''}, "
               f"{hours:g} simulated hours{est}; {p.figure.scenes}; in {p.root}")
         for pt, st, s in zip(p.points, p.states(), secs):
+            if chosen is not None and pt.name not in chosen:
+                st = "not chosen" if st not in FINISHED else st
             print(f"  {st:<11} {pt.name:<34} {pt.scene.hours:g} h  {'~' + duration(s) if s else ''}")
-            if st not in FINISHED and s:
+            if st not in FINISHED and st != "not chosen" and s:
                 all_secs.append(s)
     runs = sum(len(p.points) for p in plans)
+    runs = f"{len(chosen)} of {runs} runs chosen" if chosen is not None else f"{runs} runs"
     if not rates and not measured:
-        print(f"total: {runs} runs, {total:g} simulated hours; no benchmark table to estimate the wall time from")
+        print(f"total: {runs}, {total:g} simulated hours; no benchmark table to estimate the wall time from")
         return
     done = sum(len(v) for v in measured.values())
     bench = ("the benchmark's particle-steps/s for the kind of scene (benchmarks/results/throughput.csv) x the cost "
              "of a formed state")
     source = (f"the particle-steps/s of the {done} finished run{'s' if done != 1 else ''} kept in {records}, for "
               f"the same kind of scene, else {bench}") if done else bench
-    print(f"total: {runs} runs, {total:g} simulated hours; estimated wall time on this machine with {jobs} at a time "
+    print(f"total: {runs}, {total:g} simulated hours; estimated wall time on this machine with {jobs} at a time "
           f"(one thread each): {duration(makespan(all_secs, jobs))} ({source}; taichimyxo/figures/plan.py)")
 
 
-def run_all(plans: list, executor: str, jobs: int | None, options: dict) -> int:
-    """Every figure's unfinished runs through one executor; then each sweep's table. 0, or the exit status."""
+def run_all(plans: list, executor: str, jobs: int | None, options: dict, chosen: set | None = None) -> int:
+    """Every figure's unfinished runs (those chosen; None: all) through one executor; then each sweep's table. 0, or
+    the exit status."""
     from ..scene_run import check_output_dir
     from ..sweep.collect import collect
     from ..sweep.orchestrator import executor_module
@@ -153,6 +179,8 @@ def run_all(plans: list, executor: str, jobs: int | None, options: dict) -> int:
         for pt, st in zip(p.points, p.states()):
             if st == "recorded":                        # finished elsewhere: its record stands for it
                 recorded.add(pt.dir_name)
+                continue
+            if chosen is not None and pt.name not in chosen:
                 continue
             d = str(prepare(pt, p.root, p.sweep))
             dirs.append(d)
