@@ -72,13 +72,14 @@ def sample_weights(N: int) -> np.ndarray:
     return w
 
 
-def sample_polyline_contacts(pos, box, W: float):
+def sample_polyline_contacts(pos, box, W: float, segments: bool = False):
     """Every sample point in contact with another chain, in plain numpy, written from the definition of the contact
     energy (docs/model.md, "Contacts") and independently of the kernels: for each sample p (contact_samples) and
     each chain B it may touch (another cell; its own cell's segments at least 1.5 segments away along the cell), the
     distance from p to the polyline B, i.e. to B's nearest segment, when below W. Chains are unwrapped (n, N, 2).
-    Returns (sample cell, sample index, chain, d) arrays. One contact per sample and chain: a chain folded round a
-    sample (touching it twice) counts once here, where the kernels count each locally nearest segment."""
+    Returns (sample cell, sample index, chain, d) arrays, with `segments` also the nearest segment's index (cell
+    (N - 1) + k). One contact per sample and chain: a chain folded round a sample (touching it twice) counts once
+    here, where the kernels count each locally nearest segment."""
     pos = np.asarray(pos, dtype=np.float64)
     L = np.asarray(box, dtype=np.float64)
     n, N = pos.shape[:2]
@@ -90,7 +91,7 @@ def sample_polyline_contacts(pos, box, W: float):
     mid = a + 0.5 * e
     reach = 0.5 * np.linalg.norm(e, axis=-1).max(initial=0.0) + W
     seg_cell, seg_k = np.divmod(np.arange(len(a)), N - 1)
-    C_, H_, B_, D_ = [], [], [], []
+    C_, H_, B_, D_, J_ = [], [], [], [], []
     block = max(1, 2_000_000 // max(len(a), 1))
     for i0 in range(0, len(X), block):
         dm = mid[None, :, :] - X[i0:i0 + block, None, :]
@@ -109,12 +110,14 @@ def sample_polyline_contacts(pos, box, W: float):
         H_.append(x_h[ii[near]])
         B_.append(seg_cell[jj[near]])
         D_.append(d[near])
-    c, h, b, d = (np.concatenate(v) if v else np.zeros(0) for v in (C_, H_, B_, D_))
+        J_.append(jj[near])
+    c, h, b, d, j = (np.concatenate(v) if v else np.zeros(0) for v in (C_, H_, B_, D_, J_))
     order = np.lexsort((d, b, h, c))              # nearest segment first within each (sample, chain)
-    c, h, b, d = c[order].astype(int), h[order].astype(int), b[order].astype(int), d[order]
+    c, h, b, d, j = c[order].astype(int), h[order].astype(int), b[order].astype(int), d[order], j[order].astype(int)
     first = np.ones(len(c), bool)
     first[1:] = (c[1:] != c[:-1]) | (h[1:] != h[:-1]) | (b[1:] != b[:-1])
-    return c[first], h[first], b[first], d[first]
+    out = c[first], h[first], b[first], d[first]
+    return (*out, j[first]) if segments else out
 
 
 def contact_energy(pos, box, W: float, k_c: float) -> float:
@@ -123,3 +126,25 @@ def contact_energy(pos, box, W: float, k_c: float) -> float:
     _, h, _, d = sample_polyline_contacts(pos, box, W)
     w = sample_weights(np.asarray(pos).shape[1])
     return float(0.5 * k_c * (w[h] * (W - d) ** 2).sum())
+
+
+def segment_strain(pos, box, W: float, k_c: float) -> np.ndarray:
+    """(n, N - 1) strain energy per segment, pN·µm, the numpy twin of terms/strain.py: each sample contact's energy
+    w k_c (W - d)^2 / 2, half to the segment pressed, half to the sample's own (a particle's half split between the
+    two segments meeting there, a pole's to its one segment). For a frame whose run did not log strain."""
+    pos = np.asarray(pos, dtype=np.float64)
+    n, N = pos.shape[:2]
+    c, h, _, d, seg = sample_polyline_contacts(pos, box, W, segments=True)
+    e = 0.5 * k_c * sample_weights(N)[h] * (W - d) ** 2
+    out = np.zeros(n * (N - 1))
+    np.add.at(out, seg, 0.5 * e)
+    base = c * (N - 1)
+    mid = h % 2 == 1
+    np.add.at(out, base[mid] + (h[mid] - 1) // 2, 0.5 * e[mid])
+    k = h[~mid] // 2                              # a particle sample: particle k, between segments k - 1 and k
+    pole = (k == 0) | (k == N - 1)
+    share = np.where(pole, 0.5, 0.25) * e[~mid]
+    np.add.at(out, base[~mid] + np.minimum(k, N - 2), share)
+    inner = ~pole
+    np.add.at(out, base[~mid][inner] + k[inner] - 1, share[inner])
+    return out.reshape(n, N - 1)

@@ -130,14 +130,50 @@ def test_records_compose_a_figure_whose_run_folders_are_gone(tmp_path, capsys):
     capsys.readouterr()
 
 
-def test_strain_panel_without_logged_strain_says_so(tmp_path):
-    from taichimyxo.figures.compose import compose_figure
+def test_a_run_two_figures_share_is_run_once(tmp_path, capsys):
+    """Fig 2 D (S3, seed 1) is S3 Fig B's first seed and Fig 2 B (S1) S2 Fig B's: the same physics, seed, box and
+    duration. Kept as a record by one figure, the run stands for the other's ("shared"); a dry run of two figures
+    that share a run counts it once; a record of a shorter run stands for nothing."""
+    from taichimyxo.figures.records import save_records
+    out, records = tmp_path / "figs", tmp_path / "kept"
+    s3fig = plan_figure(FIGURES["S3Fig"], "half", out, seeds=1)
+    _fake_finished_runs(s3fig, gas=30, seed=1)
+
+    def keep(hours):
+        for pt in s3fig.points:
+            s3fig.trajectory(pt).with_suffix(".json").write_text(json.dumps(
+                {"completed": True, "fingerprint": pt.scene.fingerprint(), "scene_values": {"run": {"hours": hours}}}))
+        shutil.rmtree(records, ignore_errors=True)
+        assert len(save_records(s3fig, records)) == 4
+
+    import shutil
+    fig2 = plan_figure(FIGURES["Fig2"], "half", out)
+    fig2.records = records
+    keep(1.0)                                                   # a 1 h run is not Fig 2's 6 h
+    assert "shared" not in fig2.states()
+    keep(6.0)
+    states = dict(zip((p.name for p in fig2.points), fig2.states()))
+    assert states == {"scene=S1_seed=1": "new", "scene=S2_seed=1": "new", "scene=S3_seed=1": "shared",
+                      "scene=S4_seed=1": "new"}
+    assert fig2.record_file(fig2.points[2]).parent.name == "S3Fig.half"
+    assert main(["figures", "Fig2", "S2Fig", "--scale", "half", "--seeds", "1", "--out", str(out), "--dry-run"]) == 0
+    text = capsys.readouterr().out
+    assert "shared      cell.k_a_N_m=1e-17_seed=1          6 h  the same run as Fig2 scene=S1_seed=1" in text
+    assert text.count("shared") == 1
+
+
+def test_strain_panel_without_logged_strain_computes_it_and_says_so(tmp_path):
+    """A run that did not log strain still gives its strain panel: the energy is a function of the positions."""
+    from taichimyxo.figures.compose import compose_figure, with_strain
     runs = plan_figure(FIGURES["Fig4"], "half", tmp_path)
     _fake_finished_runs(runs, gas=30, seed=2)
     compose_figure(runs, tmp_path)
     doc = json.loads((tmp_path / "Fig4.half.json").read_text())
-    assert [p["drawn"] for p in doc["panels"]] == [True, False, True]
-    assert "B: strain energy not logged." in doc["caption"]
+    assert [p["drawn"] for p in doc["panels"]] == [True, True, True]
+    assert "B: strain energy computed from the frame's positions (its run did not log it)." in doc["caption"]
+    pt = runs.points[0]
+    fr = with_strain(runs.frame(pt, "last"), pt.scene)
+    assert fr.segment_strain.shape == (fr.n_cells, fr.particles_per_cell - 1) and fr.segment_strain.min() >= 0
 
 
 def test_composite_from_tiny_runs_with_stiffness_series(tmp_path):

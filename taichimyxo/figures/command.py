@@ -93,9 +93,10 @@ def cmd_figures(args, options: dict) -> int:
             return rc
     from .compose import compose_figure
     from .records import save_records
-    for p in plans:
+    for p in plans:                         # every record first: a figure may share another's run
         for path in save_records(p, records):
             print(f"kept {path}")
+    for p in plans:
         if any(st not in FINISHED for st in p.states()):    # a failed run: the other figures are still made
             print(f"taichimyxo: {p.figure.name} not composed: not all of its runs finished", file=sys.stderr)
             continue
@@ -119,11 +120,32 @@ def selection(plans: list, patterns: list[str] | None) -> set | None:
     return {n for n in names if any(fnmatchcase(n, pat) for pat in patterns)}
 
 
+def run_identity(point) -> tuple:
+    """What makes two figures' points one run: the scene's fingerprint (physics, seed, box; not names or outputs)
+    and the duration."""
+    return point.scene.fingerprint(), float(point.scene.hours)
+
+
+def run_owners(plans: list, chosen: set | None = None) -> dict:
+    """For each run two figures share (run_identity), the figure and point that runs it: the one whose run has
+    begun, else the first figure asked for; the other's record then stands for both. Points --runs left out do not
+    run."""
+    owners, rank = {}, {"new": 0}
+    for p in plans:
+        for pt in p.points:
+            if chosen is not None and pt.name not in chosen:
+                continue
+            k, r = run_identity(pt), rank.get(p.run_state(pt), 1)
+            if k not in owners or r > owners[k][2]:
+                owners[k] = (p.figure.name, pt.name, r)
+    return {k: v[:2] for k, v in owners.items()}
+
+
 def print_dry_run(plans: list, jobs: int, records: Path | None = None, chosen: set | None = None) -> None:
     from ..status_line import duration
     from .plan import bench_rates, makespan, measured_rates, run_seconds
     rates, measured = bench_rates(), measured_rates(records)
-    total, all_secs = 0.0, []
+    total, all_secs, owners = 0.0, [], run_owners(plans, chosen)
     for p in plans:
         secs = [run_seconds(pt.scene, rates, measured) for pt in p.points]
         hours = sum(pt.scene.hours for pt in p.points)
@@ -139,7 +161,11 @@ def print_dry_run(plans: list, jobs: int, records: Path | None = None, chosen: s
         for pt, st, s in zip(p.points, p.states(), secs):
             if chosen is not None and pt.name not in chosen:
                 st = "not chosen" if st not in FINISHED else st
-            print(f"  {st:<11} {pt.name:<34} {pt.scene.hours:g} h  {'~' + duration(s) if s else ''}")
+            owner = owners.get(run_identity(pt), (p.figure.name, pt.name))
+            if st not in FINISHED and st != "not chosen" and owner != (p.figure.name, pt.name):
+                st, s = "shared", None
+            note = f"the same run as {' '.join(owner)}" if st == "shared" else ""
+            print(f"  {st:<11} {pt.name:<34} {pt.scene.hours:g} h  {'~' + duration(s) if s else note}")
             if st not in FINISHED and st != "not chosen" and s:
                 all_secs.append(s)
     runs = sum(len(p.points) for p in plans)
@@ -174,13 +200,14 @@ def run_all(plans: list, executor: str, jobs: int | None, options: dict, chosen:
     for p in plans:
         check_output_dir(str(p.root))
     dirs, sizes, recorded = [], {}, set()
+    owners = run_owners(plans, chosen)
     for p in plans:
         p.sweep = load_sweep(write_sweep_file(p))       # the run folders name the sweep file beside them
         for pt, st in zip(p.points, p.states()):
-            if st == "recorded":                        # finished elsewhere: its record stands for it
-                recorded.add(pt.dir_name)
-                continue
             if chosen is not None and pt.name not in chosen:
+                continue
+            if st in ("recorded", "shared") or owners[run_identity(pt)] != (p.figure.name, pt.name):
+                recorded.add(pt.dir_name)               # finished elsewhere, or another figure runs it: its record
                 continue
             d = str(prepare(pt, p.root, p.sweep))
             dirs.append(d)

@@ -26,12 +26,20 @@ def figure_files(runs, out: Path) -> dict:
 
 
 def panel_image(frame, color: str):
-    """The box region of the frame rendered in `color` (RGB uint8), or None (strain not logged)."""
+    """The box region of the frame rendered in `color` (RGB uint8)."""
     from ..render import Renderer
-    if color == "strain" and frame.segment_strain is None:
-        return None
     r = Renderer((PANEL_PX, PANEL_PX), color, frame.box, decorations=False)
     return r.render(frame)[r.viewport.slices]
+
+
+def with_strain(frame, scene):
+    """The frame with its per-segment strain energy (J) computed from its positions (taichimyxo.geometry's numpy
+    twin of the strain term), for a run that did not log it: the energy is a function of the positions alone."""
+    import dataclasses
+
+    from ..geometry import segment_strain
+    e = segment_strain(frame.positions, frame.box, scene.width, scene.k_c) * 1e-18
+    return dataclasses.replace(frame, segment_strain=e)
 
 
 def _colorbar(fig, rect, color: str):
@@ -88,10 +96,10 @@ def _source(runs, pt, out: Path) -> str | None:
     or its record relative to the records' folder ("record: NAME.SCALE/<run>.npz")."""
     if pt is None:
         return None
-    if runs.trajectory(pt).is_file() or runs.records is None:
+    rec = runs.record_file(pt) if runs.records is not None else None
+    if runs.trajectory(pt).is_file() or rec is None:
         return os.path.relpath(runs.trajectory(pt), out)
-    from .records import record_dir, record_path
-    return "record: " + os.path.relpath(record_path(runs.records, runs, pt), record_dir(runs.records, runs).parent)
+    return "record: " + os.path.relpath(rec, Path(runs.records))
 
 
 def compose_figure(runs, out: Path) -> list[Path]:
@@ -131,9 +139,13 @@ def compose_figure(runs, out: Path) -> list[Path]:
         pt = runs.first_seed_point(panel.match)
         frame = runs.frame(pt, panel.frame) if pt is not None else None
         frames[panel.letter] = frame.time_s if frame is not None else None
+        if frame is not None and panel.color == "strain" and frame.segment_strain is None:
+            frame = with_strain(frame, pt.scene)
+            notes.append(f"{panel.letter}: strain energy computed from the frame's positions (its run did not log "
+                         f"it).")
         img = panel_image(frame, panel.color) if frame is not None else None
         if img is None:
-            why = "run missing" if frame is None else "strain energy not logged"
+            why = "run missing"
             ax.text(0.5, 0.5, why, transform=ax.transAxes, ha="center", va="center", fontsize=10)
             notes.append(f"{panel.letter}: {why}.")
         else:

@@ -23,7 +23,7 @@ THROUGHPUT_CSV = Path(__file__).resolve().parents[2] / "benchmarks" / "results" 
 # state after 1 simulated hour against its start; docs/performance.md)
 FORMED_STATE_FACTOR = 3.3
 TOP_KEYS = ("seeds", "scale", "box_um", "hours")
-FINISHED = ("done", "recorded")   # a run that completed, here or (its record) elsewhere
+FINISHED = ("done", "recorded", "shared")   # completed here, or elsewhere (its record), or another figure's run
 
 
 class FigureError(SceneError):
@@ -50,10 +50,17 @@ class FigureRuns:
         return state(self.run_dir(point))
 
     def record_file(self, point) -> Path | None:
-        """The run's record file (taichimyxo.figures.records) where there is one."""
-        from .records import record_path
-        path = record_path(self.records, self, point) if self.records is not None else None
-        return path if path is not None and path.is_file() else None
+        """The run's record file (taichimyxo.figures.records) where there is one: its own, else another figure's
+        record of the same run (records.shared_record)."""
+        from .records import record_path, shared_record
+        if self.records is None:
+            return None
+        path = record_path(self.records, self, point)
+        return path if path.is_file() else shared_record(self.records, point, self.shows_start(point))
+
+    def shows_start(self, point) -> bool:
+        """A panel of this figure shows the point's first frame."""
+        return any(p.frame == "first" and self.first_seed_point(p.match) is point for p in self.figure.panels)
 
     def record(self, point):
         """The run's record read back (taichimyxo.figures.records.Record), or None."""
@@ -62,12 +69,15 @@ class FigureRuns:
         return Record(path) if path is not None else None
 
     def states(self) -> list[str]:
-        """Each run's state (taichimyxo.sweep.rundir.state), "recorded" where only its record is left."""
+        """Each run's state (taichimyxo.sweep.rundir.state), "recorded" where only its record is left, "shared"
+        where another figure's record of the same run stands for it."""
+        from .records import record_dir
         out = []
         for p in self.points:
             st = self.run_state(p)
-            if st != "done" and self.record_file(p) is not None:
-                st = "recorded"
+            rec = self.record_file(p) if st != "done" else None
+            if rec is not None:
+                st = "recorded" if rec.parent == record_dir(self.records, self) else "shared"
             out.append(st)
         return out
 

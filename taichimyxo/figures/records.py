@@ -105,10 +105,32 @@ class Record:
         return _frame(self._z, which, self.meta) if f"{which}_scalars" in self._z else None
 
 
+_SUMMARIES: dict = {}     # (path, mtime) -> what shared_record compares, so each record is read once
+
+
+def shared_record(records: Path, point, first: bool) -> Path | None:
+    """A record another figure kept of this point's run: the same physics, seed and box (the scene's fingerprint,
+    which leaves out names and outputs), the same duration, completed, with the start when this figure shows it
+    (first). Fig 2's S1 and S3 runs are S2 Fig B's and S3 Fig B's first seeds: each is run once."""
+    want = (point.scene.fingerprint(), float(point.scene.hours))
+    for path in sorted(Path(records).glob("*/*.npz")):
+        key = (str(path), path.stat().st_mtime_ns)
+        if key not in _SUMMARIES:
+            with np.load(path) as z:
+                s = json.loads(z["summary_json"].tobytes().decode()) if "summary_json" in z.files else {}
+                _SUMMARIES[key] = ((s.get("fingerprint"), float(s.get("scene_values", {}).get("run", {})
+                                                                  .get("hours", -1))),
+                                   bool(s.get("completed")), "first_scalars" in z.files)
+        found, completed, has_first = _SUMMARIES[key]
+        if found == want and completed and (has_first or not first):
+            return path
+    return None
+
+
 def save_records(runs, records: Path) -> list[Path]:
-    """A record of every finished run of the figure that has none (or an older one than its trajectory)."""
+    """A record of every finished run of the figure that has none (or an older one than its trajectory). The first
+    seed's runs keep their start too: another figure sharing the run may show it."""
     written = []
-    first_needed = {tuple(sorted(p.match.items())) for p in runs.figure.panels if p.frame == "first"}
     for pt in runs.points:
         traj = runs.trajectory(pt)
         if runs.run_state(pt) != "done" or not traj.is_file():
@@ -116,8 +138,7 @@ def save_records(runs, records: Path) -> list[Path]:
         path = record_path(records, runs, pt)
         if path.is_file() and path.stat().st_mtime >= traj.stat().st_mtime:
             continue
-        first = pt.seed == runs.sweep.seeds[0] and any(
-            runs.first_seed_point(dict(m)) is pt for m in first_needed)
+        first = pt.seed == runs.sweep.seeds[0]
         written.append(write_record(path, traj, traj.with_suffix(".analysis.json"), traj.with_suffix(".json"),
                                     first))
     return written
