@@ -134,6 +134,9 @@ def _build_parser() -> argparse.ArgumentParser:
     w.add_argument("--overwrite", action="store_true", help="start the sweep's runs in --out again")
     w.add_argument("--out", help="results folder (default sweeps-results/NAME, NAME the sweep's)")
     w.add_argument("--dry-run", action="store_true", help="validate, list the points and their folders; run nothing")
+    w.add_argument("--runs", metavar="PATTERN", action="append",
+                   help="run only the points whose name matches (shell pattern, e.g. 'scene=S1_*'; repeatable): part "
+                        "of a sweep now, the rest later into the same folder")
     executor_arguments(w, "runs at a time (default: the number of cores), each on one thread")
 
     b = sub.add_parser("bench", help="measure the simulation's speed (taichimyxo/bench.py)")

@@ -59,7 +59,7 @@ def cmd_sweep(args) -> int:
     from .status_line import duration
     from .sweep import run_sweep
     res = run_sweep(args.file, executor=args.executor, jobs=args.jobs, out=args.out, dry_run=args.dry_run,
-                    options=executor_options(args), resume=args.resume, overwrite=args.overwrite)
+                    options=executor_options(args), resume=args.resume, overwrite=args.overwrite, runs=args.runs)
     sw, pts = res["sweep"], res["points"]
     combos = len(pts) // max(1, len(sw.seeds))
     over = f"{combos} grid points of {', '.join(sw.swept_keys)} x " if sw.swept_keys else ""

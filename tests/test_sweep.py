@@ -110,6 +110,9 @@ def test_a_grid_of_scenes_runs_each_scene_with_its_own_values(tmp_path, capsys):
     assert "scene = 'S99'" in line and not (tmp_path / "o").exists()
     bad.write_text('scene = "S1"\nhours = 0.001\n[grid]\nscene = ["S1", "S3"]\n')
     assert "scene and [grid] scene both given" in error_line(capsys, main(["sweep", str(bad)]))
+    line = error_line(capsys, main(["sweep", str(f), "--runs", "scene=S9*", "--out", str(tmp_path / "o")]))
+    assert "sweep --runs 'scene=S9*': matches none of the runs (scene=S1_seed=1, " in line
+    assert not (tmp_path / "o").exists()
 
 
 @pytest.mark.parametrize("grid,extra,says", [
@@ -298,9 +301,12 @@ def _csv(root):
 def test_local_sweep_runs_points_in_parallel_and_a_rerun_skips_them(tmp_path, capsys):
     f = sweep_file(tmp_path, "run.dt_ms = [1, 2]")
     root = tmp_path / "o"
+    assert main(["sweep", str(f), "--jobs", "2", "--out", str(root), "--runs", "run.dt_ms=2_*"]) == 0
+    out = capsys.readouterr()                                  # --runs: part of the sweep now, the rest later
+    assert "s: 1 completed, 0 done before, 0 failed" in out.out and "s: 1 of 1 done" in out.err
     assert main(["sweep", str(f), "--jobs", "2", "--out", str(root)]) == 0
     out = capsys.readouterr()
-    assert "s: 2 completed, 0 done before, 0 failed" in out.out and "s: 2 of 2 done" in out.err
+    assert "s: 1 completed, 1 done before, 0 failed" in out.out and "s: 2 of 2 done" in out.err
     runs = sorted((root / "runs").iterdir())
     assert [d.name.rsplit("-", 1)[0] for d in runs] == ["run.dt_ms=1_seed=1", "run.dt_ms=2_seed=1"]
     for d in runs:

@@ -11,6 +11,7 @@ import os
 import sys
 from pathlib import Path
 
+from ..sweep.spec import choose_runs
 from .plan import FINISHED
 from .specs import FIGURES, SCALES, figure
 
@@ -70,7 +71,7 @@ def cmd_figures(args, options: dict) -> int:
         raise FigureError("figures: --runs and --no-run together; --runs chooses what runs")
     figs = resolve_names(args.names)
     plans = [plan_figure(f, args.scale, Path(args.out), args.seeds) for f in figs]
-    chosen = selection(plans, args.runs)
+    chosen = choose_runs([pt.name for p in plans for pt in p.points], args.runs, "figures")
     records = Path(args.records) if args.records else Path(args.out) / "records"
     for p in plans:
         p.records = records
@@ -103,21 +104,6 @@ def cmd_figures(args, options: dict) -> int:
         for path in compose_figure(p, Path(args.out)):
             print(f"wrote {path}")
     return rc
-
-
-def selection(plans: list, patterns: list[str] | None) -> set | None:
-    """The names of the runs --runs chooses (None: all); a pattern that matches no run is refused."""
-    from fnmatch import fnmatchcase
-
-    from .plan import FigureError
-    if not patterns:
-        return None
-    names = [pt.name for p in plans for pt in p.points]
-    for pat in patterns:
-        if not any(fnmatchcase(n, pat) for n in names):
-            raise FigureError(f"figures --runs {pat!r}: matches none of the runs ({', '.join(sorted(set(names))[:4])}"
-                              f"{', ...' if len(set(names)) > 4 else ''})")
-    return {n for n in names if any(fnmatchcase(n, pat) for pat in patterns)}
 
 
 def run_identity(point) -> tuple:

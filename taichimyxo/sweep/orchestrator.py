@@ -22,7 +22,7 @@ from pathlib import Path
 from .collect import collect
 from .progress import SweepProgress
 from .rundir import prepare, state, write_text_atomic
-from .spec import SweepError, load_sweep
+from .spec import SweepError, choose_runs, load_sweep
 
 EXECUTORS = {"local": "taichimyxo.sweep.local", "slurm": "taichimyxo.sweep.slurm"}
 DEFAULT_ROOT = "sweeps-results"
@@ -53,12 +53,14 @@ def plan(path, out=None) -> tuple:
 
 
 def run_sweep(path, executor: str = "local", jobs: int | None = None, out=None, dry_run: bool = False,
-              options: dict | None = None, stream=None, resume: bool = False, overwrite: bool = False) -> dict:
+              options: dict | None = None, stream=None, resume: bool = False, overwrite: bool = False,
+              runs: list[str] | None = None) -> dict:
     """Run the sweep file at `path` (taichimyxo/sweep/__init__.py: its format) with `executor`, `jobs` runs at a time
     (default: the executor's DEFAULT_JOBS, else the number of cores), into `out` (default sweeps-results/NAME).
     Finished runs are skipped. Runs in `out` that did not finish (interrupted, killed, failed) are refused unless
     resume (continue them from their checkpoints) or overwrite (start every run of the sweep again). dry_run:
-    validate and list, run and write nothing.
+    validate and list, run and write nothing. runs: shell patterns on the point names; only the matching runs run
+    (the rest later or elsewhere, into the same folder), the table collects every finished one.
 
     Returns dict(sweep, root, points: [(point, run_dir, state)], results: run_dir -> result, counts: completed /
     skipped / failed / interrupted / not started, csv, plots). Bad input (the file, a point, the executor or its
@@ -69,7 +71,10 @@ def run_sweep(path, executor: str = "local", jobs: int | None = None, out=None, 
     if hasattr(ex, "check_options"):
         opts = ex.check_options(opts)
     jobs = jobs or getattr(ex, "DEFAULT_JOBS", None) or os.cpu_count() or 1     # slurm: the cluster decides
+    chosen = choose_runs([p.name for p in points], runs, "sweep")
     listing = [(p, p.run_dir(root), state(p.run_dir(root))) for p in points]
+    if chosen is not None:
+        listing = [(p, d, st if p.name in chosen or st == "done" else "not chosen") for p, d, st in listing]
     counts = {"completed": 0, "skipped": 0, "failed": 0, "interrupted": 0, "not started": 0}
     if dry_run:
         return {"sweep": sweep, "root": root, "points": listing, "results": {}, "counts": counts, "jobs": jobs}
@@ -78,9 +83,10 @@ def run_sweep(path, executor: str = "local", jobs: int | None = None, out=None, 
     check_output_dir(str(root))
     write_text_atomic(root / "sweep.toml", Path(sweep.path).read_text())     # what was asked, beside the results
     dirs = [str(prepare(p, root, sweep)) for p in points]
-    todo = [d for d, (_, _, st) in zip(dirs, listing) if st != "done"]
-    counts["skipped"] = len(dirs) - len(todo)
-    progress = SweepProgress(sweep.name, total=len(dirs), skipped=counts["skipped"], jobs=jobs, stream=stream)
+    todo = [d for d, (_, _, st) in zip(dirs, listing) if st not in ("done", "not chosen")]
+    counts["skipped"] = sum(st == "done" for _, _, st in listing)
+    progress = SweepProgress(sweep.name, total=counts["skipped"] + len(todo), skipped=counts["skipped"], jobs=jobs,
+                             stream=stream)
     progress.tick()
     results: dict = {}
     try:
@@ -106,9 +112,9 @@ def check_earlier_runs(listing: list, root, resume: bool, overwrite: bool) -> li
     if overwrite:
         import shutil
         for _, d, st in listing:
-            if st != "new":
+            if st not in ("new", "not chosen"):
                 shutil.rmtree(d)
-        return [(p, d, "new") for p, d, _ in listing]
+        return [(p, d, "not chosen" if st == "not chosen" else "new") for p, d, st in listing]
     if unfinished and not resume:
         p, d, st = unfinished[0]
         raise SweepError(f"{root} holds {len(unfinished)} unfinished run{'s' * (len(unfinished) > 1)} of this sweep "

@@ -139,6 +139,20 @@ def scene_key(scene: Scene, length: int = 10) -> str:
     return hashlib.sha1(json.dumps(d, sort_keys=True).encode()).hexdigest()[:length]
 
 
+def choose_runs(names: list[str], patterns: list[str] | None, flag: str) -> set | None:
+    """The run names that `--runs` shell patterns match (None: no patterns, every run); a pattern matching none is
+    refused (SweepError naming the flag and a few of the names)."""
+    from fnmatch import fnmatchcase
+    if not patterns:
+        return None
+    known = sorted(set(names))
+    for pat in patterns:
+        if not any(fnmatchcase(n, pat) for n in known):
+            raise SweepError(f"{flag} --runs {pat!r}: matches none of the runs ({', '.join(known[:4])}"
+                             f"{', ...' if len(known) > 4 else ''})")
+    return {n for n in known if any(fnmatchcase(n, pat) for pat in patterns)}
+
+
 def value_text(v) -> str:
     """A value as it reads in a point's name: 1e-17, active, true, 0.5."""
     if isinstance(v, bool):
