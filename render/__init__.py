@@ -26,7 +26,7 @@ __all__ = ["render_frame", "VideoWriter", "write_png", "render_trajectory", "Ren
 
 
 def render_trajectory(gsd_path, out_path, color="speed", size=(1920, 1080), fps=30, every=1, png_path=None,
-                      progress=True, png_size=PNG_SIZE, **options) -> int:
+                      progress=True, png_size=PNG_SIZE, strain_from=None, **options) -> int:
     """Render the GSD trajectory ``gsd_path`` to the MP4 ``out_path`` (no simulation). Returns the frame count.
 
     color: speed, strain, identity, polarity or orientation. size: the largest frame (the movie takes the domain's
@@ -34,7 +34,9 @@ def render_trajectory(gsd_path, out_path, color="speed", size=(1920, 1080), fps=
     a PNG figure panel (:func:`write_png`, ``png_size``, same colours and labels). options: VideoWriter / Renderer
     options (crf, preset, keyframe_interval, vmin, vmax, background, fit, title, …); the title defaults to the
     scene name stored in the trajectory.
-    Raises ValueError if ``color="strain"`` and the trajectory has no strain energy logged."""
+    strain_from: (W µm, k_c pN/µm) to colour by the strain energy computed from each frame's positions
+    (taichimyxo.geometry.segment_strain) where the trajectory has none logged; without it, ValueError if
+    ``color="strain"`` and the trajectory has no strain energy logged."""
     from taichimyxo.trajectory import count_frames, read_frames
 
     gsd_path, out_path = os.fspath(gsd_path), os.fspath(out_path)
@@ -58,6 +60,9 @@ def render_trajectory(gsd_path, out_path, color="speed", size=(1920, 1080), fps=
     try:
         with VideoWriter(out_path, size=size, fps=fps, color=color, **options) as vw:
             for fr in frames:
+                if color == "strain" and fr.segment_strain is None and strain_from is not None:
+                    from taichimyxo.geometry import segment_strain
+                    fr.segment_strain = segment_strain(fr.positions, fr.box, *strain_from) * 1e-18     # J
                 if color == "strain" and fr.segment_strain is None:
                     raise ValueError(f"{gsd_path}: color='strain' but the trajectory has no strain energy logged "
                                      f"(log/bonds/strain_energy_J); use color='speed' or rerun with strain output")

@@ -49,8 +49,8 @@ def check_output_dir(out_dir: str) -> Path:
 def find_reusable_trajectory(scene: Scene, out: Path, recursive: bool = False) -> tuple[Path, int] | None:
     """A completed trajectory of the same physics, seed and at least the same length in `out` (e.g. S3's for S8;
     recursive: in any folder below it, e.g. a sweep's or the figures' runs): rendering it needs no simulation.
-    Strain must have been logged if the scene colours by strain, and the scene's movie frames must fall on the
-    trajectory's frames. Returns (path, every k-th frame to render)."""
+    A scene coloured by strain takes the logged strain, else the strain computed from the positions (render_only);
+    the scene's movie frames must fall on the trajectory's frames. Returns (path, every k-th frame to render)."""
     fp = scene.fingerprint()
     movie_s = scene.frame_every_steps * scene.dt
     for js in sorted(out.rglob("*.json") if recursive else out.glob("*.json")):
@@ -61,8 +61,6 @@ def find_reusable_trajectory(scene: Scene, out: Path, recursive: bool = False) -
         if not isinstance(d, dict) or d.get("fingerprint") != fp or not d.get("completed"):
             continue
         if d.get("simulated_seconds", 0) + 1e-9 < scene.hours * 3600 - scene.dt:
-            continue
-        if scene.color == "strain" and not d.get("strain_logged"):
             continue
         # summaries older than output.trajectory_interval_min wrote a trajectory frame per movie frame
         traj_s = d.get("trajectory_interval_s") or \
@@ -203,7 +201,7 @@ def render_only(scene: Scene, gsd: Path, out: Path, progress: bool = True, every
     size = scene.video_size
     n = render_trajectory(str(gsd), str(files["mp4"]), color=scene.color, size=size,
                           fps=scene.fps, png_path=str(files["png"]), progress=progress, every=every,
-                          title=scene.name)
+                          title=scene.name, strain_from=(scene.width, scene.k_c))
     summary = {"summary_version": SUMMARY_VERSION, "scene": scene.name, "seed": scene.seed,
                "fingerprint": scene.fingerprint(), "completed": True, "status": "rendered from trajectory",
                "source_trajectory": gsd.name if gsd.parent == out else str(gsd),

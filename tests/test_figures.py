@@ -330,6 +330,19 @@ def test_videos_render_a_finished_run_instead_of_simulating_it(tmp_path, capsys)
     done = json.loads((out / "S1-half.json").read_text())
     assert done["status"] == "rendered from trajectory" and done["frames"] == 3
     assert (out / "S1-half.mp4").stat().st_size > 0 and "rendered from the finished run" in capsys.readouterr().out
+    # S8 (S3 coloured by strain) from a run of S3's physics that did not log strain (S3 Fig B's): computed
+    s8 = video_scene("S8", scale="half")
+    run = tmp_path / "figs" / "S3Fig" / "runs" / "scene=S3FigB_seed=1-abc"
+    run.mkdir(parents=True)
+    write_synthetic(str(run / "scene=S3FigB_seed=1.gsd"), v_b=V_B, box=s8.box, n_frames=3, gas=30, seed=1)
+    (run / "scene=S3FigB_seed=1.json").write_text(json.dumps(
+        {"fingerprint": s8.fingerprint(), "completed": True, "simulated_seconds": s8.hours * 3600,
+         "strain_logged": False, "trajectory_interval_s": s8.frame_every_steps * s8.dt,
+         "files": {"gsd": "scene=S3FigB_seed=1.gsd"}}))
+    assert main(["videos", "--only", "S8", "--scale", "half", "--from", str(tmp_path / "figs"),
+                 "--out", str(out)]) == 0
+    assert json.loads((out / "S8-half.json").read_text())["status"] == "rendered from trajectory"
+    capsys.readouterr()
     for argv, says in ((["--preview", "--scale", "half"], "--preview and --scale half together"),
                        (["--from", str(tmp_path / "nowhere")], "no such folder")):
         assert says in error_line(capsys, main(["videos", "--only", "S1", *argv, "--out", str(tmp_path / "o")]))

@@ -305,3 +305,7 @@ def test_render_trajectory_equals_render_frame(tmp_path):
     with pytest.raises(ValueError, match="no strain"):
         render_trajectory(gsd2, tmp_path / "nostrain.mp4", color="strain", size=size, progress=False)
     assert not (tmp_path / "nostrain.mp4").exists()
+    # ... unless told the contact law: the strain energy computed from each frame's positions
+    assert render_trajectory(gsd2, tmp_path / "computed.mp4", color="strain", size=size, progress=False,
+                             strain_from=(0.5, 10.0)) == 2
+    assert (tmp_path / "computed.mp4").stat().st_size > 0
