@@ -76,7 +76,8 @@ def cmd_sweep(args) -> int:
     c = res["counts"]
     print(f"{sw.name}: {c['completed']} completed, {c['skipped']} done before, {c['failed']} failed"
           + (f", {c['interrupted'] + c['not started']} interrupted or not started" if c["interrupted"] +
-             c["not started"] else ""))
+             c["not started"] else "")
+          + (f", {c['running elsewhere']} running in another process" if c["running elsewhere"] else ""))
     for d, r in res["results"].items():
         if r.get("status") == "failed":
             print(f"  failed {r.get('name')}: {r.get('error')} (log: {os.path.join(d, 'run.log')})")

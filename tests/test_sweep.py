@@ -328,6 +328,32 @@ def test_local_sweep_runs_points_in_parallel_and_a_rerun_skips_them(tmp_path, ca
 
 
 @pytest.mark.slow
+def test_a_run_another_process_is_running_is_left_to_it(tmp_path, capsys):
+    """Running the same sweep again while its first command still runs a point (a rerun to "resume", a requeued
+    job) never runs that folder twice at once: the folder is locked by the process running it; the second command
+    lists it as running, leaves it, and refuses --overwrite; once the lock is gone the run goes on."""
+    from taichimyxo.sweep.rundir import hold, state
+    from taichimyxo.sweep.runner import run_point
+    f = sweep_file(tmp_path, "run.dt_ms = [1, 2]")
+    root = tmp_path / "o"
+    assert main(["sweep", str(f), "--out", str(root), "--runs", "run.dt_ms=1_*"]) == 0
+    capsys.readouterr()
+    busy = next(d for d in (root / "runs").iterdir() if d.name.startswith("run.dt_ms=2_"))
+    lock = hold(busy)                                          # as the first command's worker holds it
+    assert lock is not None and state(busy) == "running"
+    assert run_point(str(busy))["status"] == "running elsewhere"
+    assert main(["sweep", str(f), "--out", str(root), "--dry-run"]) == 0
+    assert "running     run.dt_ms=2_seed=1" in capsys.readouterr().out
+    assert main(["sweep", str(f), "--out", str(root)]) == 0
+    assert "s: 0 completed, 1 done before, 0 failed, 1 running in another process" in capsys.readouterr().out
+    assert "running now in another process (run.dt_ms=2_seed=1); --overwrite only once" in error_line(
+        capsys, main(["sweep", str(f), "--out", str(root), "--overwrite"]))
+    assert not (busy / "result.json").exists()
+    lock.close()                                               # the first command ended
+    assert state(busy) == "new" and main(["sweep", str(f), "--out", str(root)]) == 0
+    assert "s: 1 completed, 1 done before, 0 failed" in capsys.readouterr().out
+
+
 def test_a_failing_point_fails_alone_and_an_interrupted_one_resumes(tmp_path, capsys):
     """run.dt_ms = 100 (force: past the stability limit) breaks an invariant at its first frame; the dt = 1 point
     was interrupted after 1000 steps before the sweep and resumes from its checkpoint."""

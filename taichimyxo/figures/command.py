@@ -198,7 +198,10 @@ def run_all(plans: list, executor: str, jobs: int | None, options: dict, chosen:
             d = str(prepare(pt, p.root, p.sweep))
             dirs.append(d)
             sizes[d] = pt.scene.steps * pt.scene.n_cells
-    todo = sorted((d for d in dirs if _state(d) != "done"), key=lambda d: -sizes[d])    # longest first
+    todo = sorted((d for d in dirs if _state(d) not in ("done", "running")), key=lambda d: -sizes[d])  # longest 1st
+    for d in dirs:
+        if _state(d) == "running":
+            print(f"taichimyxo: {Path(d).name} is running in another process; left to it", file=sys.stderr)
     names = "+".join(p.figure.name for p in plans)
     progress = SweepProgress(names, total=len(dirs) + len(recorded), skipped=len(dirs) + len(recorded) - len(todo),
                              jobs=jobs)
@@ -209,7 +212,7 @@ def run_all(plans: list, executor: str, jobs: int | None, options: dict, chosen:
         progress.close()
     for p in plans:
         collect(p.sweep, p.root, p.points)
-    bad = {d: r for d, r in results.items() if r.get("status") not in ("completed", "skipped")}
+    bad = {d: r for d, r in results.items() if r.get("status") not in ("completed", "skipped", "running elsewhere")}
     for d, r in bad.items():
         print(f"  {r.get('status', 'failed')} {r.get('name')}: {r.get('error') or ''} (log: {d}/run.log)",
               file=sys.stderr)

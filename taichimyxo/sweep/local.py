@@ -18,7 +18,8 @@ import sys
 import time
 from pathlib import Path
 
-from .rundir import LOG_FILE, POINT_FILE, read_json, read_result
+from .rundir import LOG_FILE, POINT_FILE, RUNNING_ELSEWHERE, read_json, read_result
+from .runner import EXIT
 from .spec import SweepError
 
 OPTIONS = {"threads": 1}
@@ -55,6 +56,8 @@ def outcome(run_dir: str, rc: int, launched_at: float) -> dict:
         return r
     if rc in (EXIT_INTERRUPTED, -signal.SIGINT, -signal.SIGTERM):
         return {"name": name, "run_dir": run_dir, "status": "interrupted", "error": None}
+    if rc == EXIT[RUNNING_ELSEWHERE]:
+        return {"name": name, "run_dir": run_dir, "status": RUNNING_ELSEWHERE, "error": None}
     why = _last_line(Path(run_dir) / LOG_FILE) or "no output"
     how = f"killed by signal {-rc}" if rc < 0 else f"exit {rc}"
     return {"name": name, "run_dir": run_dir, "status": "failed", "error": f"{how}: {why}"}

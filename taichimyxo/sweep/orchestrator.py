@@ -21,7 +21,7 @@ from pathlib import Path
 
 from .collect import collect
 from .progress import SweepProgress
-from .rundir import prepare, state, write_text_atomic
+from .rundir import RUNNING_ELSEWHERE, prepare, state, write_text_atomic
 from .spec import SweepError, choose_runs, load_sweep
 
 EXECUTORS = {"local": "taichimyxo.sweep.local", "slurm": "taichimyxo.sweep.slurm"}
@@ -75,7 +75,7 @@ def run_sweep(path, executor: str = "local", jobs: int | None = None, out=None, 
     listing = [(p, p.run_dir(root), state(p.run_dir(root))) for p in points]
     if chosen is not None:
         listing = [(p, d, st if p.name in chosen or st == "done" else "not chosen") for p, d, st in listing]
-    counts = {"completed": 0, "skipped": 0, "failed": 0, "interrupted": 0, "not started": 0}
+    counts = {"completed": 0, "skipped": 0, "failed": 0, "interrupted": 0, "not started": 0, RUNNING_ELSEWHERE: 0}
     if dry_run:
         return {"sweep": sweep, "root": root, "points": listing, "results": {}, "counts": counts, "jobs": jobs}
     listing = check_earlier_runs(listing, root, resume, overwrite)
@@ -83,8 +83,9 @@ def run_sweep(path, executor: str = "local", jobs: int | None = None, out=None, 
     check_output_dir(str(root))
     write_text_atomic(root / "sweep.toml", Path(sweep.path).read_text())     # what was asked, beside the results
     dirs = [str(prepare(p, root, sweep)) for p in points]
-    todo = [d for d, (_, _, st) in zip(dirs, listing) if st not in ("done", "not chosen")]
+    todo = [d for d, (_, _, st) in zip(dirs, listing) if st not in ("done", "not chosen", "running")]
     counts["skipped"] = sum(st == "done" for _, _, st in listing)
+    counts[RUNNING_ELSEWHERE] = sum(st == "running" for _, _, st in listing)   # another command's: left to it
     progress = SweepProgress(sweep.name, total=counts["skipped"] + len(todo), skipped=counts["skipped"], jobs=jobs,
                              stream=stream)
     progress.tick()
@@ -109,6 +110,10 @@ def check_earlier_runs(listing: list, root, resume: bool, overwrite: bool) -> li
     from ..outdir import refuse_file_as_folder
     refuse_file_as_folder(root)
     unfinished = [(p, d, st) for p, d, st in listing if st in ("interrupted", "failed")]
+    going = [p.name for p, _, st in listing if st == "running"]
+    if overwrite and going:
+        raise SweepError(f"{root}: {len(going)} run{'s' * (len(going) > 1)} of this sweep running now in another "
+                         f"process ({going[0]}); --overwrite only once they have stopped")
     if overwrite:
         import shutil
         for _, d, st in listing:

@@ -12,6 +12,8 @@ RESULT = "result.json"
 SCENE_FILE = "scene.toml"
 POINT_FILE = "point.json"
 LOG_FILE = "run.log"
+LOCK_FILE = ".lock"
+RUNNING_ELSEWHERE = "running elsewhere"     # run_point's status for a folder another process is running
 
 
 def write_text_atomic(path, text: str) -> None:
@@ -39,15 +41,48 @@ def read_result(run_dir) -> dict | None:
     return read_json(Path(run_dir) / RESULT)
 
 
+def hold(run_dir, wait_s: float = 5.0):
+    """The run folder's lock, held by the process that runs it (an open file; closing it, or the process ending
+    however it ends, releases it), or None when another process holds it: two commands never run one folder at once
+    (a rerun while the first is still going, a requeued Slurm job). Waits up to wait_s for a moment's holder
+    (`state` peeking)."""
+    import fcntl
+    import time
+    f = open(Path(run_dir) / LOCK_FILE, "a")        # noqa: SIM115 - held open for the run's lifetime
+    t_end = time.monotonic() + wait_s
+    while True:
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            return f
+        except OSError:
+            if time.monotonic() >= t_end:
+                f.close()
+                return None
+            time.sleep(0.1)
+
+
+def running(run_dir) -> bool:
+    """Another process holds the folder's lock: the run is going on now."""
+    if not (Path(run_dir) / LOCK_FILE).is_file():
+        return False
+    f = hold(run_dir, wait_s=0.0)
+    if f is None:
+        return True
+    f.close()
+    return False
+
+
 def state(run_dir) -> str:
-    """done (completed), failed (ended for good without completing), interrupted (a checkpoint to resume from, or
-    the trajectory of a run killed before its first) or new."""
+    """done (completed), failed (ended for good without completing), running (another process runs it now),
+    interrupted (a checkpoint to resume from, or the trajectory of a run killed before its first) or new."""
     d = Path(run_dir)
     r = read_result(d)
     if r and r.get("status") == "completed":
         return "done"
     if r and r.get("status") == "failed":
         return "failed"
+    if running(d):
+        return "running"
     # a checkpoint, or a trajectory of a run killed before its first checkpoint
     if d.is_dir() and (any(d.glob("*.ckpt.npz")) or any(d.glob("*.gsd"))):
         return "interrupted"

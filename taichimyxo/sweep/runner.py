@@ -14,10 +14,12 @@ A run folder is self-contained, so a process on another machine or a Slurm node 
   result.json         written last, atomically, when the run ended for good (completed or failed): status,
                       simulated and wall time, the outcomes (taichimyxo.sweep.collect.outcomes), the error
   run.log             what the run printed (the local executor's workers)
+  .lock               locked by the process running the point, so no two run one folder at once
 
 `run_point(run_dir)` skips a completed run, resumes from the checkpoint when there is one, analyses a run whose
 simulation completed but whose analysis did not, and returns a small dict. `python -m taichimyxo.sweep RUN_DIR
-[--threads N]` does the same from the command line (exit 0 completed or skipped, 1 failed, 130 interrupted)."""
+[--threads N]` does the same from the command line (exit 0 completed or skipped, 1 failed, 130 interrupted, 75 the
+folder is being run by another process)."""
 from __future__ import annotations
 
 import json
@@ -27,7 +29,7 @@ import traceback
 from pathlib import Path
 
 from .collect import outcomes
-from .rundir import POINT_FILE, RESULT, SCENE_FILE, read_json, read_result, write_json_atomic
+from .rundir import POINT_FILE, RESULT, RUNNING_ELSEWHERE, SCENE_FILE, hold, read_json, read_result, write_json_atomic
 
 
 def run_point(run_dir: str, threads: int = 1) -> dict:
@@ -44,6 +46,9 @@ def run_point(run_dir: str, threads: int = 1) -> dict:
     done = read_result(run_dir)
     if done and done.get("status") == "completed":
         return {**done, "status": "skipped"}
+    lock = hold(run_dir)
+    if lock is None:
+        return {**base, "status": RUNNING_ELSEWHERE, "error": None}
     try:
         return _run(run_dir, point, base, threads, t0)
     except KeyboardInterrupt:
@@ -55,6 +60,8 @@ def run_point(run_dir: str, threads: int = 1) -> dict:
                "process_seconds": time.perf_counter() - t0, "ended_at": time.time()}
         write_json_atomic(run_dir / RESULT, res)
         return res
+    finally:
+        lock.close()
 
 
 def _run(run_dir: Path, point: dict, base: dict, threads: int, t0: float) -> dict:
@@ -94,7 +101,7 @@ def _run(run_dir: Path, point: dict, base: dict, threads: int, t0: float) -> dic
     return res
 
 
-EXIT = {"completed": 0, "skipped": 0, "failed": 1, "interrupted": 130}
+EXIT = {"completed": 0, "skipped": 0, "failed": 1, "interrupted": 130, RUNNING_ELSEWHERE: 75}
 
 
 def main(argv=None) -> int:
