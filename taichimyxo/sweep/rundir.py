@@ -54,11 +54,13 @@ def hold(run_dir, wait_s: float = 5.0):
         try:
             fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
             return f
-        except OSError:
+        except BlockingIOError:
             if time.monotonic() >= t_end:
                 f.close()
                 return None
             time.sleep(0.1)
+        except OSError:                 # a file system without locks (some network mounts): run unguarded
+            return f
 
 
 def running(run_dir) -> bool:
