@@ -3,7 +3,7 @@
 A figure's runs last hours, and their folders (trajectory, checkpoint) are tens of megabytes; a figure needs of each
 run only the frames its panels show (the last; the first for a panel of the start) and its analysis summary (the
 stiffness series' measures). `figures` writes one record per finished run, ``RECORDS/NAME.SCALE/<run folder>.npz``
-(about 60 KB for 500 cells), and composes from the record where the run's folder is gone, so a figure whose runs
+(60-140 KB for 500 cells), and composes from the record where the run's folder is gone, so a figure whose runs
 finished on several machines, or in several sessions of one that was wiped in between, is still composed from all
 of them (docs/figures.md, "Records"). The record's name carries the run folder's key, the hash of the resolved
 scene: a record of other physics never stands in for a run."""
@@ -58,6 +58,18 @@ def _frame(z, prefix: str, meta: dict) -> Frame:
                  segment_strain=strain, meta=meta)
 
 
+TRACK_SERIES = ("time_min", "n_cells")     # what the stiffness series reads of a track's frames
+
+
+def slim_analysis(a: dict) -> dict:
+    """The analysis summary as a record keeps it: everything but the per-frame series of each aggregate track beyond
+    TRACK_SERIES and each track's first and last aggregate (a 6 h run's tracks are 90 % of its summary's size)."""
+    tracks = [{**{k: v for k, v in tr.items() if k not in ("start", "end", "last", "series")},
+               "series": {k: v for k, v in tr.get("series", {}).items() if k in TRACK_SERIES}}
+              for tr in a.get("tracks", [])]
+    return {**a, "tracks": tracks}
+
+
 def write_record(path: Path, trajectory: Path, analysis: Path | None, summary: Path | None,
                  first: bool) -> Path:
     """The record of one finished run: its last frame (and first, when a panel shows the start), its analysis
@@ -67,9 +79,10 @@ def write_record(path: Path, trajectory: Path, analysis: Path | None, summary: P
     if first:
         arrays.update(_frame_arrays("first", panel_frame(trajectory, "first")))
     texts = {"meta": json.dumps(last.meta, default=str)}
-    for key, p in (("analysis", analysis), ("summary", summary)):
-        if p is not None and p.is_file():
-            texts[key] = p.read_text()
+    if analysis is not None and analysis.is_file():
+        texts["analysis"] = json.dumps(slim_analysis(json.loads(analysis.read_text())), separators=(",", ":"))
+    if summary is not None and summary.is_file():
+        texts["summary"] = summary.read_text()
     for k, v in texts.items():
         arrays[f"{k}_json"] = np.frombuffer(v.encode(), np.uint8)
     arrays["version"] = np.array(RECORD_VERSION)
