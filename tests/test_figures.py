@@ -202,6 +202,8 @@ def test_composite_from_tiny_runs_with_stiffness_series(tmp_path):
     from taichimyxo.figures.records import save_records
     runs.records = tmp_path / "records"
     assert len(save_records(runs, runs.records)) == 4
+    from taichimyxo.figures.records import Record
+    assert all(str(tmp_path) not in json.dumps(Record(f).analysis) for f in runs.records.glob("*/*.npz"))
     shutil.rmtree(runs.root / "runs")
     assert runs.states() == ["recorded"] * 4
     compose_figure(runs, tmp_path / "again")

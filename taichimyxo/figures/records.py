@@ -63,11 +63,15 @@ TRACK_SERIES = ("time_min", "n_cells")     # what the stiffness series reads of 
 
 def slim_analysis(a: dict) -> dict:
     """The analysis summary as a record keeps it: everything but the per-frame series of each aggregate track beyond
-    TRACK_SERIES and each track's first and last aggregate (a 6 h run's tracks are 90 % of its summary's size)."""
+    TRACK_SERIES and each track's first and last aggregate (a 6 h run's tracks are 90 % of its summary's size), the
+    trajectory named without its folder."""
     tracks = [{**{k: v for k, v in tr.items() if k not in ("start", "end", "last", "series")},
                "series": {k: v for k, v in tr.get("series", {}).items() if k in TRACK_SERIES}}
               for tr in a.get("tracks", [])]
-    return {**a, "tracks": tracks}
+    meta = {**a.get("meta", {})}
+    if meta.get("trajectory"):
+        meta["trajectory"] = os.path.basename(str(meta["trajectory"]))     # a record carries no machine's paths
+    return {**a, "meta": meta, "tracks": tracks}
 
 
 def write_record(path: Path, trajectory: Path, analysis: Path | None, summary: Path | None,
