@@ -91,29 +91,26 @@ def sample_polyline_contacts(pos, box, W: float, segments: bool = False):
     mid = a + 0.5 * e
     reach = 0.5 * np.linalg.norm(e, axis=-1).max(initial=0.0) + W
     seg_cell, seg_k = np.divmod(np.arange(len(a)), N - 1)
-    C_, H_, B_, D_, J_ = [], [], [], [], []
-    block = max(1, 2_000_000 // max(len(a), 1))
-    for i0 in range(0, len(X), block):
-        dm = mid[None, :, :] - X[i0:i0 + block, None, :]
-        dm -= L * np.round(dm / L)
-        ii, jj = np.nonzero((dm * dm).sum(-1) < reach * reach)
-        ii = ii + i0
-        own = x_cell[ii] == seg_cell[jj]
-        ok = ~own | (x_h[ii] - (2 * seg_k[jj] + 2) >= 3) | (2 * seg_k[jj] - x_h[ii] >= 3)
-        ii, jj = ii[ok], jj[ok]
-        e0 = min_image(a[jj] - X[ii], L)
-        ee = np.maximum((e[jj] ** 2).sum(-1), EPS)
-        u = np.clip(-(e0 * e[jj]).sum(-1) / ee, 0.0, 1.0)
-        d = np.linalg.norm(e0 + u[:, None] * e[jj], axis=-1)
-        near = d < W
-        C_.append(x_cell[ii[near]])
-        H_.append(x_h[ii[near]])
-        B_.append(seg_cell[jj[near]])
-        D_.append(d[near])
-        J_.append(jj[near])
-    c, h, b, d, j = (np.concatenate(v) if v else np.zeros(0) for v in (C_, H_, B_, D_, J_))
+    # candidates: samples within reach of a segment's midpoint (a periodic k-d tree, sorted per sample)
+    from scipy.spatial import cKDTree
+
+    def wrap(y):                                  # into [0, L) as the periodic tree needs (mod can round up to L)
+        y = np.mod(y, L)
+        return np.where(y >= L, 0.0, y)
+    found = cKDTree(wrap(mid), boxsize=L).query_ball_point(wrap(X), reach, return_sorted=True)
+    ii = np.repeat(np.arange(len(X)), [len(f) for f in found])
+    jj = np.fromiter((j for f in found for j in f), dtype=np.int64, count=len(ii))
+    own = x_cell[ii] == seg_cell[jj]
+    ok = ~own | (x_h[ii] - (2 * seg_k[jj] + 2) >= 3) | (2 * seg_k[jj] - x_h[ii] >= 3)
+    ii, jj = ii[ok], jj[ok]
+    e0 = min_image(a[jj] - X[ii], L)
+    ee = np.maximum((e[jj] ** 2).sum(-1), EPS)
+    u = np.clip(-(e0 * e[jj]).sum(-1) / ee, 0.0, 1.0)
+    d = np.linalg.norm(e0 + u[:, None] * e[jj], axis=-1)
+    near = d < W
+    c, h, b, d, j = x_cell[ii[near]], x_h[ii[near]], seg_cell[jj[near]], d[near], jj[near]
     order = np.lexsort((d, b, h, c))              # nearest segment first within each (sample, chain)
-    c, h, b, d, j = c[order].astype(int), h[order].astype(int), b[order].astype(int), d[order], j[order].astype(int)
+    c, h, b, d, j = c[order], h[order], b[order], d[order], j[order]
     first = np.ones(len(c), bool)
     first[1:] = (c[1:] != c[:-1]) | (h[1:] != h[:-1]) | (b[1:] != b[:-1])
     out = c[first], h[first], b[first], d[first]
