@@ -35,7 +35,7 @@ def render_trajectory(gsd_path, out_path, color="speed", size=(1920, 1080), fps=
     options (crf, preset, keyframe_interval, vmin, vmax, background, fit, title, …); the title defaults to the
     scene name stored in the trajectory.
     strain_from: (W µm, k_c pN/µm) to colour by the strain energy computed from each frame's positions
-    (taichimyxo.geometry.segment_strain) where the trajectory has none logged; without it, ValueError if
+    (Frame.with_strain) where the trajectory has none logged; without it, ValueError if
     ``color="strain"`` and the trajectory has no strain energy logged."""
     from taichimyxo.trajectory import count_frames, read_frames
 
@@ -60,9 +60,8 @@ def render_trajectory(gsd_path, out_path, color="speed", size=(1920, 1080), fps=
     try:
         with VideoWriter(out_path, size=size, fps=fps, color=color, **options) as vw:
             for fr in frames:
-                if color == "strain" and fr.segment_strain is None and strain_from is not None:
-                    from taichimyxo.geometry import segment_strain
-                    fr.segment_strain = segment_strain(fr.positions, fr.box, *strain_from) * 1e-18     # J
+                if color == "strain" and strain_from is not None:
+                    fr = fr.with_strain(*strain_from)
                 if color == "strain" and fr.segment_strain is None:
                     raise ValueError(f"{gsd_path}: color='strain' but the trajectory has no strain energy logged "
                                      f"(log/bonds/strain_energy_J); use color='speed' or rerun with strain output")

@@ -52,6 +52,17 @@ class Frame:
         idx = np.where(self.engine_direction > 0, self.particles_per_cell - 1, 0)
         return self.positions[np.arange(self.n_cells), idx]
 
+    def with_strain(self, W: float, k_c: float) -> "Frame":
+        """This frame with its per-segment strain energy (J) computed from its positions (geometry.segment_strain,
+        the numpy twin of the strain term; W µm, k_c pN/µm) where its run did not log it: a function of the positions
+        alone. The frame itself where strain is already there."""
+        if self.segment_strain is not None:
+            return self
+        from dataclasses import replace
+
+        from .geometry import segment_strain
+        return replace(self, segment_strain=segment_strain(self.positions, self.box, W, k_c) * 1e-18)
+
 
 def unwrap_chains(pos: np.ndarray, box) -> np.ndarray:
     """Make each cell's chain continuous: particle 0 wrapped into the box, each next particle the minimum image of

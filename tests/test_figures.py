@@ -164,7 +164,7 @@ def test_a_run_two_figures_share_is_run_once(tmp_path, capsys):
 
 def test_strain_panel_without_logged_strain_computes_it_and_says_so(tmp_path):
     """A run that did not log strain still gives its strain panel: the energy is a function of the positions."""
-    from taichimyxo.figures.compose import compose_figure, with_strain
+    from taichimyxo.figures.compose import compose_figure
     runs = plan_figure(FIGURES["Fig4"], "half", tmp_path)
     _fake_finished_runs(runs, gas=30, seed=2)
     compose_figure(runs, tmp_path)
@@ -172,7 +172,7 @@ def test_strain_panel_without_logged_strain_computes_it_and_says_so(tmp_path):
     assert [p["drawn"] for p in doc["panels"]] == [True, True, True]
     assert "B: strain energy computed from the frame's positions (its run did not log it)." in doc["caption"]
     pt = runs.points[0]
-    fr = with_strain(runs.frame(pt, "last"), pt.scene)
+    fr = runs.frame(pt, "last").with_strain(pt.scene.width, pt.scene.k_c)
     assert fr.segment_strain.shape == (fr.n_cells, fr.particles_per_cell - 1) and fr.segment_strain.min() >= 0
 
 

@@ -11,6 +11,7 @@ import os
 import sys
 from pathlib import Path
 
+from ..sweep.rundir import RUNNING_ELSEWHERE
 from ..sweep.spec import choose_runs
 from .plan import FINISHED
 from .specs import FIGURES, SCALES, figure
@@ -198,13 +199,14 @@ def run_all(plans: list, executor: str, jobs: int | None, options: dict, chosen:
             d = str(prepare(pt, p.root, p.sweep))
             dirs.append(d)
             sizes[d] = pt.scene.steps * pt.scene.n_cells
-    todo = sorted((d for d in dirs if _state(d) not in ("done", "running")), key=lambda d: -sizes[d])  # longest 1st
-    for d in dirs:
-        if _state(d) == "running":
-            print(f"taichimyxo: {Path(d).name} is running in another process; left to it", file=sys.stderr)
+    states = {d: _state(d) for d in dirs}
+    todo = sorted((d for d in dirs if states[d] not in ("done", "running")), key=lambda d: -sizes[d])  # longest 1st
+    going = [d for d in dirs if states[d] == "running"]
+    for d in going:
+        print(f"taichimyxo: {Path(d).name} is running in another process; left to it", file=sys.stderr)
     names = "+".join(p.figure.name for p in plans)
-    progress = SweepProgress(names, total=len(dirs) + len(recorded), skipped=len(dirs) + len(recorded) - len(todo),
-                             jobs=jobs)
+    total = len(dirs) + len(recorded) - len(going)
+    progress = SweepProgress(names, total=total, skipped=total - len(todo), jobs=jobs)
     progress.tick()
     try:
         results = ex.execute(todo, jobs, opts, progress) if todo else {}
@@ -212,7 +214,7 @@ def run_all(plans: list, executor: str, jobs: int | None, options: dict, chosen:
         progress.close()
     for p in plans:
         collect(p.sweep, p.root, p.points)
-    bad = {d: r for d, r in results.items() if r.get("status") not in ("completed", "skipped", "running elsewhere")}
+    bad = {d: r for d, r in results.items() if r.get("status") not in ("completed", "skipped", RUNNING_ELSEWHERE)}
     for d, r in bad.items():
         print(f"  {r.get('status', 'failed')} {r.get('name')}: {r.get('error') or ''} (log: {d}/run.log)",
               file=sys.stderr)

@@ -32,16 +32,6 @@ def panel_image(frame, color: str):
     return r.render(frame)[r.viewport.slices]
 
 
-def with_strain(frame, scene):
-    """The frame with its per-segment strain energy (J) computed from its positions (taichimyxo.geometry's numpy
-    twin of the strain term), for a run that did not log it: the energy is a function of the positions alone."""
-    import dataclasses
-
-    from ..geometry import segment_strain
-    e = segment_strain(frame.positions, frame.box, scene.width, scene.k_c) * 1e-18
-    return dataclasses.replace(frame, segment_strain=e)
-
-
 def _colorbar(fig, rect, color: str):
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import ListedColormap, LogNorm, Normalize
@@ -140,7 +130,7 @@ def compose_figure(runs, out: Path) -> list[Path]:
         frame = runs.frame(pt, panel.frame) if pt is not None else None
         frames[panel.letter] = frame.time_s if frame is not None else None
         if frame is not None and panel.color == "strain" and frame.segment_strain is None:
-            frame = with_strain(frame, pt.scene)
+            frame = frame.with_strain(pt.scene.width, pt.scene.k_c)
             notes.append(f"{panel.letter}: strain energy computed from the frame's positions (its run did not log "
                          f"it).")
         img = panel_image(frame, panel.color) if frame is not None else None
