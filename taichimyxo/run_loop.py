@@ -69,13 +69,16 @@ class Run:
     step (made once per step, on first use). full_window: the current frame's speeds were averaged over the full
     speed window. last_frame: the last frame handed to writers. wall_seconds: from the start until every writer
     was closed. steps_done: steps advanced in this call. gave_up: the run stopped after rolling back to the
-    same place with every split (sim.rollbacks lists the rollbacks)."""
+    same place with every split (sim.rollbacks lists the rollbacks). wall_by_hour: wall seconds this call spent
+    advancing each simulated hour (index = hour, writers included), which shows how a run's cost grows as its
+    state forms (docs/performance.md)."""
 
     def __init__(self, sim, writers, end_step: int):
         self.sim, self.writers = sim, writers
         self.start_step, self.end_step = sim.step_count, end_step
         self.status, self.broken, self.gave_up = "running", None, False
         self.steps_done, self.wall_seconds = 0, 0.0
+        self.wall_by_hour: list[float] = []
         self.full_window = False
         self.last_frame = None
         self._frame = None
@@ -186,6 +189,7 @@ def drive(sim, n_steps: int, writers=(), *, chunk_steps: int = 2000, speed_windo
         steps when they break an invariant."""
         snapshot = sim.take_snapshot() if rollback else None
         split, redone = 1, []
+        hour, t0 = int(sim.time // 3600.0), time.perf_counter()
         while True:
             try:
                 sim.advance(n) if split == 1 else sim.advance_split(n, split)
@@ -194,6 +198,8 @@ def drive(sim, n_steps: int, writers=(), *, chunk_steps: int = 2000, speed_windo
                     event(F)
                 for w in writers:
                     w.after_chunk(run)
+                run.wall_by_hour.extend([0.0] * (hour + 1 - len(run.wall_by_hour)))
+                run.wall_by_hour[hour] += time.perf_counter() - t0
                 return
             except (InvariantBroken, NeighbourOverflow) as e:
                 if snapshot is None:

@@ -270,7 +270,13 @@ def previous_sessions(path: Path, scene) -> dict:
     if not isinstance(d, dict) or d.get("fingerprint") != scene.fingerprint() or d.get("completed"):
         return {}
     return {"wall_seconds_total": float(d.get("wall_seconds_total", d.get("wall_seconds", 0.0))),
-            "sessions": int(d.get("sessions", 1))}
+            "sessions": int(d.get("sessions", 1)),
+            "wall_seconds_by_hour": [float(w) for w in d.get("wall_seconds_by_hour", [])]}
+
+
+def _add_lists(a: list, b: list) -> list:
+    n = max(len(a), len(b))
+    return [round((a[i] if i < len(a) else 0.0) + (b[i] if i < len(b) else 0.0), 3) for i in range(n)]
 
 
 def _load_average() -> float | None:
@@ -320,6 +326,8 @@ def run_summary(run, path: Path, files: dict, checkpoint, resumed: bool, setup_s
         "steps_this_session": sim.step_count - run.start_step,
         "simulated_seconds_this_session": (sim.step_count - run.start_step) * scene.dt,
         "wall_seconds": wall, "setup_seconds": setup_s,
+        # wall seconds each simulated hour cost (index = hour; over every session): the cost grows as the state forms
+        "wall_seconds_by_hour": _add_lists(before.get("wall_seconds_by_hour", []), run.wall_by_hour),
         "particle_steps_per_second": run.steps_done * sim.n_p / max(wall, 1e-9),
         "frame_interval_s": scene.frame_every_steps * scene.dt,
         "trajectory_interval_s": scene.trajectory_every_steps * scene.dt,

@@ -52,3 +52,21 @@ def test_summary_after_resume_pairs_this_sessions_steps_with_its_wall_time(ti_cp
     line = capsys.readouterr().out.splitlines()[0]
     assert f", 2600 steps (2.6 s simulated) in {rest['wall_seconds']:.1f} s wall" in line
     assert "; run total over 2 sessions: 3600 steps, 3.6 s simulated" in line
+
+
+def test_summary_splits_the_wall_time_by_simulated_hour_over_sessions(make_sim, tmp_path):
+    """wall_seconds_by_hour: the wall time each simulated hour cost, added over the sessions of a resumed run."""
+    from taichimyxo.run_loop import drive
+    from taichimyxo.writers import Summary
+    sim = make_sim(build_small_scene(4, run={"hours": 0.001, "dt_ms": 1.0}))
+    sim.set_state(sim.state.positions(), sim.state.ke.to_numpy(), step=3_599_000)      # 1 s before hour 1
+    path = tmp_path / "s.json"
+    first = Summary(path)
+    drive(sim, 2000, [first], catch_signals=False, chunk_steps=400, stop_after_steps=600)      # interrupted
+    by_hour = first.summary["wall_seconds_by_hour"]
+    assert len(by_hour) == 1 and by_hour[0] > 0                   # the chunks that began in hour 0
+    rest = Summary(path, resumed=True)
+    drive(sim, 900, [rest], catch_signals=False, chunk_steps=400)     # 3599.6 s -> 3600.5 s: chunks in both hours
+    total = rest.summary["wall_seconds_by_hour"]
+    assert len(total) == 2 and all(w > 0 for w in total) and total[0] > by_hour[0]
+    assert sum(total) <= first.summary["wall_seconds"] + rest.summary["wall_seconds"] + 1e-3
