@@ -92,6 +92,20 @@ def test_stiffness_sweep_is_the_s2_and_s3_fig_series_at_half_scale():
         assert p.scene.n_cells == 500                                          # the paper's density on 100 x 100
 
 
+def test_every_shipped_sweep_file_loads_and_its_points_are_valid_scenes():
+    """A sweep file is read only when someone runs it, often hours later: each must load, and each point must be a
+    validated scene with the seeds and duration the file names."""
+    from taichimyxo.sweep import load_sweep
+    files = sorted((REPO / "sweeps").rglob("*.toml"))
+    assert len(files) >= 10
+    for f in files:
+        sw = load_sweep(f)
+        pts = sw.points()
+        assert pts, f.name
+        for p in pts:
+            assert p.scene.n_cells > 0 and p.scene.hours > 0, (f.name, p.name)
+
+
 def test_a_grid_of_scenes_runs_each_scene_with_its_own_values(tmp_path, capsys):
     """[grid] scene sweeps base scenes: Fig 2's runs are S1-S4 themselves at the figure's scale, S3 at its own
     4 ms step, so each run is the scene (the same fingerprint) a video can be rendered from."""
