@@ -20,8 +20,10 @@ of taichimyxo.sweep.collect (rotating aggregates, fraction of cells in them, mea
 A setting **agrees** on an outcome when its seed mean lies within the reference's seed range (min..max); the table
 also gives the difference of the means in units of the reference's seed standard deviation and Welch's t (the
 difference over the standard error of the difference of two means; with 3 seeds a side a range can be narrow by
-chance, so read both). A setting may become a
-default only if it agrees on every outcome (ACCURACY.md). Also the cost: wall seconds per simulated hour of each run
+chance, so read both). A setting may become a default only if it agrees on every outcome (ACCURACY.md). An
+outcome measured in at most half of either side's seeds is not judged: it hardly exists in that scene (the edge
+speed and size of rotating aggregates where the runs form almost none, as non-guided S1), and whether aggregates
+form is judged by n_aggregates. Also the cost: wall seconds per simulated hour of each run
 (the runs of a sweep run side by side, so compare costs within one sweep only).
 
 Writes accuracy_outcomes.csv (a row per run) and accuracy_outcomes.md (the comparison) into --out (default
@@ -88,6 +90,7 @@ def compare(rows: list[dict], reference: str) -> list[dict]:
     out = []
     for setting, rs in by.items():
         for oc in CHECKED + ("wall_s_per_sim_h",):
+            rare = any(2 * sum(r.get(oc) is not None for r in side) <= len(side) for side in (rs, ref))
             vals = np.asarray([r[oc] for r in rs if r.get(oc) is not None], float)
             rv = np.asarray([r[oc] for r in ref if r.get(oc) is not None], float)
             m = float(vals.mean()) if len(vals) else math.nan
@@ -100,7 +103,8 @@ def compare(rows: list[dict], reference: str) -> list[dict]:
                             values=[float(v) for v in vals], ref_min=lo, ref_max=hi,
                             diff_in_ref_sd=(m - float(rv.mean())) / rsd if rsd and rsd > 0 else math.nan,
                             welch_t=(m - float(rv.mean())) / se if se and se > 0 else math.nan,
-                            agrees=None if cost or not len(vals) or not len(rv) else bool(lo <= m <= hi)))
+                            rare=rare and bool(len(vals)),
+                            agrees=None if cost or rare else bool(lo <= m <= hi)))
     return out
 
 
@@ -112,6 +116,8 @@ def markdown(cmp: list[dict], reference: str) -> str:
     for c in cmp:
         vals = ", ".join(f"{v:.3g}" for v in c["values"])
         ag = "" if c["agrees"] is None else ("yes" if c["agrees"] else "**no**")
+        if c.get("rare"):
+            ag = "not judged (in at most half the seeds)"
         if not c["seeds"]:
             continue                        # an outcome these runs were not measured by (earlier CSVs' rows)
         lines.append(f"| {c['setting']} | {c['outcome']} | {c['mean']:.3g} ± {c['sd']:.2g} ({c['seeds']}) | "
@@ -123,8 +129,10 @@ def markdown(cmp: list[dict], reference: str) -> str:
         if s == reference:
             continue
         bad = [c["outcome"] for c in cmp if c["setting"] == s and c["agrees"] is False]
+        rare = [c["outcome"] for c in cmp if c["setting"] == s and c.get("rare")]
         lines.append(f"- {s}: " + ("agrees with the reference on every outcome" if not bad else
-                                    "outside the reference's seed range on " + ", ".join(bad)))
+                                    "outside the reference's seed range on " + ", ".join(bad))
+                     + (f" (not judged, measured in at most half the seeds: {', '.join(rare)})" if rare else ""))
     return "\n".join(lines) + "\n"
 
 
