@@ -158,7 +158,7 @@ def test_a_run_two_figures_share_is_run_once(tmp_path, capsys):
     assert fig2.record_file(fig2.points[2]).parent.name == "S3Fig.half"
     assert main(["figures", "Fig2", "S2Fig", "--scale", "half", "--seeds", "1", "--out", str(out), "--dry-run"]) == 0
     text = capsys.readouterr().out
-    assert "shared      cell.k_a_N_m=1e-17_seed=1          6 h  the same run as Fig2 scene=S1_seed=1" in text
+    assert "shared      scene=S2FigB_seed=1                6 h  the same run as Fig2 scene=S1_seed=1" in text
     assert text.count("shared") == 1
 
 
