@@ -27,9 +27,9 @@ from taichimyxo.scene import Scene
 from taichimyxo.trajectory import TrajectoryWriter
 
 REPO = Path(__file__).resolve().parent.parent
-SETS = {"domain": {"width_um": 20.0, "height_um": 20.0}}
+SETS = {"domain": {"width_um": 20.0, "height_um": 20.0}, "run": {"dt_ms": 2.0}}      # 600 steps: 1.2 s
 ARGS = ["scene", "S1", "--no-movie", "--quiet", "--set", "domain.width_um=20", "--set", "domain.height_um=20",
-        "--hours", "0.001"]
+        "--set", "run.dt_ms=2", "--hours", "0.001"]
 
 
 def cli(*args, cwd=None):
