@@ -206,7 +206,7 @@ def check_state(name: str):
     if not store.is_file():
         from taichimyxo.bench import scaled_scene
         from taichimyxo.simulation import Simulation
-        sim = Simulation(scaled_scene(scene, area))
+        sim = Simulation(scaled_scene(scene, area, run={"dt_ms": 2}))   # the states as first measured, at 2 ms
         sim.advance(steps)
         np.savez(store, positions=sim.positions(), engine_direction=sim.engine_direction())
         sim.close()
