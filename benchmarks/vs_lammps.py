@@ -87,14 +87,14 @@ def run_taichimyxo(name: str, steps: int, warm: int) -> dict:
     """Particle-steps per second of a scene at paper scale, or of a benchmark state (benchmarks/states.py), through
     the public API (the scene's own step and precision), after `warm` steps (compilation and the first list
     builds)."""
-    from states import DENSE_WARM_STEPS, STATES, load
+    from states import DENSE_WARM_STEPS, STATE_RUN, STATES, load
     from taichimyxo import backend
     from taichimyxo.scene import Scene
     from taichimyxo.simulation import Simulation
     scene, start = name, None
     if name in STATES:
         scene, _, start = load(name)
-    sc = Scene.load(scene, {"output": {"movie": False}})
+    sc = Scene.load(scene, {"output": {"movie": False}, "run": STATE_RUN.get(name, {})})
     backend.restart()
     sim = Simulation(sc) if start is None else Simulation.from_positions(sc, start[0], start[1])
     warm = max(warm, DENSE_WARM_STEPS) if name == "S13 dense" else warm
