@@ -57,6 +57,11 @@ class Interrupt:
             raise KeyboardInterrupt
         self.signum = signum
 
+    def request(self, signum) -> None:
+        """Stop after the current chunk, as if `signum` had come (a no-op when a stop is already asked for)."""
+        if self.signum is None:
+            self.signum = signum
+
     def __exit__(self, *exc):
         for s, h in self._old.items():
             signal.signal(s, h)

@@ -38,7 +38,7 @@ SWEEP = """
 name = "slurm-test"
 scene = "S1"
 seeds = 1
-hours = 0.01                        # 36 s simulated: 18000 steps of 2 ms
+hours = 0.01                        # 36 s simulated: 18000 steps of 2 ms (run.dt_ms below)
 box_um = [20, 20]
 
 [grid]
@@ -46,6 +46,7 @@ guiding.kind = ["none", "active"]
 
 [set]
 output.frame_interval_min = 0.05    # a trajectory frame every 3 s: 13 frames
+run.dt_ms = 2                       # pinned, not S1's own 4 ms: the paused run has work left when it wakes
 
 [outputs]
 movie = false

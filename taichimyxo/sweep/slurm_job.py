@@ -5,9 +5,9 @@ How a time limit becomes a resumed run:
 
 1. the job is submitted with ``--signal=USR2@signal_delay_s``: slurmctld sends SIGUSR2 to the job's step at most
    signal_delay_s + 30 s before the time limit (it checks time limits every 30 s) and SIGTERM at the limit;
-2. :class:`TimeLimitStop` turns that SIGUSR2 into the stop the simulation knows: once the run's driver listens
-   (taichimyxo.run_loop.Interrupt, also when the signal came before the simulation started), it sends the process one
-   SIGTERM; the driver finishes its chunk, closes the trajectory and writes the checkpoint (what Ctrl-C does);
+2. :class:`TimeLimitStop` turns that SIGUSR2 into the stop the simulation knows (taichimyxo.run_loop.Interrupt): at
+   once when the run's driver listens, otherwise one SIGTERM as soon as it does (the signal came before the
+   simulation started); the driver finishes its chunk, closes the trajectory and writes the checkpoint (as Ctrl-C);
 3. run_point returns "interrupted", and the handler submitit installed for SIGUSR2 runs: ``checkpoint()`` (submitit's
    Checkpointable: the same call again, which resumes from the checkpoint on disk), ``scontrol requeue``, exit. The
    job is pending again and starts over, up to the executor's max_requeues times.
@@ -68,15 +68,17 @@ class TimeLimitStop:
         print(f"taichimyxo: caught {signal.Signals(signum).name} (time limit or preemption): stopping with a "
               "checkpoint", flush=True)
         self.signalled.set()
+        driver = _listening_driver()
+        if driver is not None:      # the stop is asked for here, in the main thread: the chunk now running is the last
+            driver.request(signal.SIGTERM)
 
     def _forward(self) -> None:
-        """After the warning: wait until the simulation's driver handles SIGTERM, then send one (a second one would
-        stop it at once, without a checkpoint, so never when it already has one)."""
+        """After a warning that came before the simulation's driver listened: wait until it handles SIGTERM, then
+        send one (a second one would stop it at once, without a checkpoint, so never when it already has one)."""
         while not self._done.is_set():
             if self.signalled.is_set():
-                handler = signal.getsignal(signal.SIGTERM)
-                driver = getattr(handler, "__self__", None)
-                if isinstance(driver, Interrupt):
+                driver = _listening_driver()
+                if driver is not None:
                     if driver.signum is None:
                         os.kill(os.getpid(), signal.SIGTERM)
                     return
@@ -86,6 +88,12 @@ class TimeLimitStop:
         """Run the SIGUSR2 handler that was installed before (submitit's: checkpoint(), scontrol requeue, exit)."""
         if callable(self._previous):
             self._previous(signal.SIGUSR2, None)
+
+
+def _listening_driver() -> Interrupt | None:
+    """The simulation driver's signal catcher, when it handles SIGTERM now (taichimyxo.run_loop.drive)."""
+    driver = getattr(signal.getsignal(signal.SIGTERM), "__self__", None)
+    return driver if isinstance(driver, Interrupt) else None
 
 
 @contextmanager
