@@ -8,13 +8,13 @@
   paper's box (seed 1 on the diagonal, seed 2 off it). Shipped as a small file, so every benchmark measures the same
   state without the hours of simulation; the command remakes it bit for bit (runs are bit-identical).
 - "S13 dense": S13 (60 x 60 µm, 1440 cells aligned at 4e7 cells/cm², area fraction ~1, flexible cells, active
-  following, k_c = 0.002 N/m) after DENSE_WARM_STEPS steps of its 2 ms from its start, placed from the scene's seed:
-  the start is a lattice at exactly W (almost no pair in contact), which jams within that 0.6 s into real contacts
-  everywhere, what the high-density scenes cost (benchmarks/results/dense_step.md). Its aligned rows hold no other
+  following, k_c = 0.002 N/m) after DENSE_WARM_STEPS steps of its 2 ms from its start, placed from the scene's seed
+  with population.aligned_tilt_deg = 0: the start is a lattice at exactly W (almost no pair in contact), which
+  jams within that 0.6 s into real contacts everywhere, what the high-density scenes cost (benchmarks/results/dense_step.md). Its aligned rows hold no other
   count near S3's 2000 cells at that density.
 
 `load(name)` gives (scene name, area multiple, start) for taichimyxo.bench.measure: start is (positions,
-engine_direction) or None for the scene's own start. `STATE_RUN[name]`: the run values a state is defined and
+engine_direction). `STATE_RUN[name]`: the run values a state is defined and
 measured with, where they differ from its scene's defaults (S13 itself now runs imex-explicit at 20 ms).
 """
 from __future__ import annotations
@@ -44,7 +44,10 @@ def load(name: str):
         z = np.load(S3_1H)
         return "S3", 1.0, (z["positions"], z["engine_direction"])
     if name == "S13 dense":
-        return "S13", 1.0, None
+        # the start the state was defined with: the exact lattice (the scene's own start tilts each cell)
+        from taichimyxo.placement import initial_configuration
+        from taichimyxo.scene import Scene
+        return "S13", 1.0, initial_configuration(Scene.load("S13", {"population": {"aligned_tilt_deg": 0.0}}))
     raise SystemExit(f"states: unknown state {name!r}; known: {', '.join(STATES)}")
 
 

@@ -8,8 +8,11 @@ A state is healthy when
     without meaning anything). Exception, by the physics: a guiding or slime pull of up to F_max = 200 pN acts on
     one particle, whose normal drag is zeta_n = 94 pN s/µm, so a head swinging sideways (a flexible follower curling
     round a leader's tail: ~10 v_b for about a second) or a rigid cell spinning as a ring on its own tail (tail
-    particle 5.2 v_b, steady) is legitimately faster, identically at dt / 4. In scenes with such pulls the particle
-    bound is therefore 5 v_b + F_max / (zeta_n v_b) (37 v_b at the paper's values); the centre bound stays 5 v_b.
+    particle 5.2 v_b, steady) is legitimately faster, identically at dt / 4. And in every scene a contact can pass
+    a whole cell's engine force F_e onto one particle (a pole pressing on a side; cells buckling in a dense jam:
+    S11 without guiding reaches 5.04 v_b at 2 ms, unchanged at dt / 8, docs/accuracy.md). The particle bound is
+    therefore 5 v_b + max(F_e, F_max) / (zeta_n v_b) (21 v_b without pulls, 37 v_b with the paper's guiding); the
+    centre bound stays 5 v_b.
     An explicit-Euler instability grows geometrically and breaks the length and distance bounds as well;
   - no two segments of different cells come closer than 0.3 W, nor two non-adjacent segments of one cell
     (segments k and k + 2 included: a hairpin folded on the node of k + 1 is pushed apart by the node contacts of
@@ -50,9 +53,10 @@ class Bounds:
 
     @classmethod
     def for_scene(cls, scene, **kw) -> "Bounds":
-        """The default bounds, with the particle speed bound widened by the largest one-particle pull the scene
-        has (guiding F_max^g, slime F_max^s) over the normal drag (see the module docstring)."""
-        pull = 0.0
+        """The default bounds, with the particle speed bound widened by the largest force one particle can take
+        (a cell's engine force through a contact, guiding F_max^g, slime F_max^s) over the normal drag (see the
+        module docstring)."""
+        pull = scene.engine_force
         if scene.guiding != "none":
             pull = max(pull, scene.guiding_f_max)
         if scene.slime:

@@ -135,8 +135,10 @@ def random_start(scene, max_tries_per_cell: int = PLACEMENT_TRIES_PER_CELL, prog
 
 
 def aligned_start(scene):
-    """All cells parallel to x, packed in rows W apart, cell ends touching: area fraction n L W / area (1.0 at the
-    paper's high density). Each row gets a random offset along x; missing cells leave random empty slots."""
+    """All cells along x, packed in rows W apart, cell ends touching: area fraction n L W / area (1.0 at the
+    paper's high density). Each row gets a random offset along x; missing cells leave random empty slots. Each cell
+    is turned about its centre by a uniform random angle within +- scene.aligned_tilt_deg: the model has no noise,
+    and exactly parallel rows only ever push along their own line (docs/model.md "Initial configurations")."""
     n, N, l0, W, L = scene.n_cells, scene.N, scene.rest_length, scene.width, scene.length
     Lx, Ly = scene.box
     per_row = int(math.floor(Lx / L + 1e-9))
@@ -150,11 +152,12 @@ def aligned_start(scene):
     if n < len(slots):
         order = np.argsort(draws.next(len(slots)), kind="stable")
         slots = np.sort(order[:n])
+    tilts = np.radians(scene.aligned_tilt_deg) * (2.0 * rng.uniform(scene.seed, rng.STREAM_TILT, np.arange(n)) - 1.0)
     pos = np.zeros((n, N, 2))
     for k, s in enumerate(slots):
         r, i = divmod(int(s), per_row)
         c = np.array([(i + 0.5) * pitch + offsets[r], (r + 0.5) * Ly / rows])
-        pos[k] = straight_cell(c, 0.0, N, l0)
+        pos[k] = straight_cell(c, float(tilts[k]), N, l0)
     pos[:, :, 0] = np.mod(pos[:, :1, 0], Lx) + (pos[:, :, 0] - pos[:, :1, 0])
     return pos, _polarities(scene, n)
 

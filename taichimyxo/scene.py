@@ -167,10 +167,18 @@ class Scene:
     def to_dict(self) -> dict:
         return copy.deepcopy(self.raw)
 
+    def trajectory_values(self, exclude=("output", "scene", "preview")) -> dict:
+        """The resolved values that can change the simulated trajectory: the sections not excluded, less the keys
+        that the scene's start does not read (so adding such a key leaves other scenes' hashes as they were)."""
+        d = {k: (copy.deepcopy(v) if isinstance(v, dict) else v) for k, v in self.raw.items() if k not in exclude}
+        if self.start != "aligned" and "population" in d:
+            d["population"].pop("aligned_tilt_deg", None)
+        return d
+
     def fingerprint(self, exclude=("output", "scene", "preview")) -> str:
         """Hash of everything that changes the simulated trajectory (not the output settings)."""
         import hashlib
-        d = {k: v for k, v in self.raw.items() if k not in exclude}
+        d = self.trajectory_values(exclude)
         d["run"] = {k: v for k, v in d["run"].items() if k != "hours"}
         d["_dt"] = self.dt
         return hashlib.sha1(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
@@ -259,6 +267,10 @@ class Scene:
     @property
     def polarity(self) -> str:
         return self.raw["population"]["polarity"]
+
+    @property
+    def aligned_tilt_deg(self) -> float:
+        return self.raw["population"]["aligned_tilt_deg"]
 
     @property
     def v_b_um_per_min(self) -> float:

@@ -36,6 +36,9 @@ SCHEMA: dict[str, dict[str, tuple]] = {
         "density_cells_per_cm2": (_F, 5e6, "pos", "cell density (low 5e6, high 4e7)"),
         "cells": (_I, 0, "nonneg", "number of cells; 0 = density x area"),
         "polarity": (_S, "random", ("random", "same"), "engine directions at start"),
+        "aligned_tilt_deg": (_F, 1.0, ("range", 0.0, 30.0), "aligned start: each cell turned about its centre by a "
+                             "uniform random angle within +- this, degrees; 0 = exactly parallel rows, which without "
+                             "guiding never leave their lanes [decision, docs/model.md]"),
     },
     "cell": {
         "length_um": (_F, 5.0, "pos", "outline length L including round caps, µm"),

@@ -112,8 +112,9 @@ def compile_record() -> Path:
 def configuration_key(scene) -> str:
     """What the compiled kernels depend on: everything but the seed, the duration and the outputs."""
     import hashlib
-    d = {k: v for k, v in scene.raw.items() if k not in ("output", "scene", "preview")}
+    d = scene.trajectory_values()
     d["run"] = {k: v for k, v in d["run"].items() if k not in ("seed", "hours")}
+    d["population"].pop("aligned_tilt_deg", None)            # placement only: the kernels do not read it
     return hashlib.sha1(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
 
 

@@ -46,3 +46,21 @@ def test_invariant_checks_name_what_broke():
     assert "segment lengths 1.00..1.60 l0" in check_frame(fr, sc, 5.0, True)
     fr.positions[0, 2, 1] = np.nan
     assert check_frame(fr, sc, 5.0, True) == "non-finite positions"
+
+
+def test_particle_speed_bound_allows_the_largest_force_one_particle_can_take():
+    """Bounds.for_scene: 5 v_b plus the largest force on one particle over its normal drag. Every scene has
+    contacts, which can pass a whole cell's engine force onto one particle (21 v_b at the paper's values: dense
+    non-guided S11 exceeds 5 v_b physically, the same at an eighth of the step); guiding pulls up to F_max^g
+    (37 v_b); the cell centre bound stays 5 v_b."""
+    import pytest
+
+    from taichimyxo.invariants import Bounds
+    plain = build_small_scene(2)
+    guided = build_small_scene(2, guiding={"kind": "active"})
+    per_force = 1.0 / (plain.zeta_n * plain.v_b)
+    assert Bounds.for_scene(plain).speed_factor == pytest.approx(5.0 + plain.engine_force * per_force)
+    assert Bounds.for_scene(plain).speed_factor == pytest.approx(21.0, abs=0.5)
+    assert Bounds.for_scene(guided).speed_factor == pytest.approx(5.0 + guided.guiding_f_max * per_force)
+    assert Bounds.for_scene(guided).speed_factor == pytest.approx(37.0, abs=0.5)
+    assert Bounds.for_scene(plain).centre_speed_factor == Bounds.for_scene(guided).centre_speed_factor == 5.0

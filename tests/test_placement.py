@@ -26,8 +26,9 @@ def test_random_start_has_the_density_and_no_overlaps():
 
 
 def test_aligned_start_fills_area_fraction_one():
+    """With population.aligned_tilt_deg = 0: rows of cells exactly along x, W apart, their caps just touching."""
     sc = Scene.from_dict({"domain": {"width_um": 20.0, "height_um": 20.0},
-                          "population": {"start": "aligned", "density_cells_per_cm2": 4e7}})
+                          "population": {"start": "aligned", "density_cells_per_cm2": 4e7, "aligned_tilt_deg": 0.0}})
     pos, ke = initial_configuration(sc)
     n = len(pos)
     assert n * sc.length * sc.width / (20.0 * 20.0) == pytest.approx(1.0)
@@ -42,6 +43,42 @@ def test_aligned_start_fills_area_fraction_one():
             pb[None, :-1] - pa[:-1, None], sc.box) - (pb[None, :-1] - pa[:-1, None]),
             pb[None, 1:] + min_image(pb[None, :-1] - pa[:-1, None], sc.box) - (pb[None, :-1] - pa[:-1, None]))
         assert dist.min() >= sc.width - 1e-9
+
+
+def test_aligned_start_tilts_each_cell_about_its_centre():
+    """The default aligned start turns each cell by its own angle within +- aligned_tilt_deg about the centre the
+    untilted start gives it (same rows, same offsets, same polarities), so rows are not exactly one-dimensional;
+    the angles spread over the whole range and depend on the seed."""
+    base = {"domain": {"width_um": 20.0, "height_um": 20.0},
+            "population": {"start": "aligned", "density_cells_per_cm2": 4e7}}
+    sc = Scene.from_dict(base)
+    flat = Scene.from_dict({**base, "population": {**base["population"], "aligned_tilt_deg": 0.0}})
+    assert sc.aligned_tilt_deg == 1.0
+    pos, ke = initial_configuration(sc)
+    pos0, ke0 = initial_configuration(flat)
+    np.testing.assert_array_equal(ke, ke0)
+    np.testing.assert_allclose(pos.mean(1), pos0.mean(1), atol=1e-9)
+    d = pos[:, -1] - pos[:, 0]
+    angle = np.degrees(np.arctan2(d[:, 1], d[:, 0]))
+    assert np.abs(angle).max() <= 1.0 + 1e-9
+    assert angle.min() < -0.8 and angle.max() > 0.8 and np.abs(angle).min() < 0.2
+    seg = np.linalg.norm(np.diff(pos, axis=1), axis=-1)
+    np.testing.assert_allclose(seg, sc.rest_length, rtol=1e-12)
+    other = initial_configuration(Scene.from_dict({**base, "run": {"seed": 2}}))[0]
+    assert not np.allclose(np.diff(other, axis=1), np.diff(pos, axis=1))
+
+
+def test_aligned_tilt_changes_only_aligned_scenes_hashes():
+    """The tilt is read by the aligned start alone: it enters the fingerprint (what a resume and a sweep's finished
+    run compare) of aligned scenes and leaves every other scene's as it was."""
+    from taichimyxo.sweep.spec import scene_key
+    for start, changes in [("aligned", True), ("random", False), ("spiral", False)]:
+        pop = {"start": start, "density_cells_per_cm2": 4e7 if start == "aligned" else 5e6}
+        a = Scene.from_dict({"domain": {"width_um": 20.0, "height_um": 20.0}, "population": pop})
+        b = Scene.from_dict({"domain": {"width_um": 20.0, "height_um": 20.0},
+                             "population": {**pop, "aligned_tilt_deg": 2.0}})
+        assert (a.fingerprint() != b.fingerprint()) is changes
+        assert (scene_key(a) != scene_key(b)) is changes
 
 
 def test_spiral_start_cells_head_to_tail():
@@ -175,3 +212,25 @@ def test_dense_feasible_start_shows_placement_progress(tmp_path):
     assert progress and all(" simulated (" in ln and (ln.endswith(" left") or " ..." in ln) for ln in progress)
     assert not any(ln.endswith(" left") for ln in progress)
     assert progress[-1].startswith("S1: 0.7 s of 0.7 s simulated (100 %)")
+
+
+def test_dense_non_guided_rows_leave_their_lanes_only_from_a_tilted_start(small_scene, make_sim):
+    """S11 on a 10 x 10 µm box (40 cells at area fraction 1, k_c = 0.002 N/m, no guiding, 2 ms): from exactly
+    parallel rows every force lies along the row and no particle ever leaves its row's line; from the default start
+    (each cell turned by up to 1 degree) cells pushing head on buckle, and within a minute a cell has moved further
+    across than the row spacing, as the paper's S11 shows no pattern (docs/model.md "Initial configurations")."""
+    sc = small_scene(0, box=(10.0, 10.0), population={"start": "aligned", "density_cells_per_cm2": 4e7},
+                     collisions={"k_c_N_per_m": 0.002}, run={"dt_ms": 2.0})
+    flat = initial_configuration(Scene.from_dict({**sc.to_dict(), "population": {
+        **sc.to_dict()["population"], "aligned_tilt_deg": 0.0}}))
+    tilted = initial_configuration(sc)
+    sim = make_sim(sc, *flat)
+    steps = int(round(30.0 / sc.dt))
+    sim.advance(steps)
+    assert np.array_equal(sim.positions()[..., 1], flat[0][..., 1])      # exactly on its row's line, every particle
+    assert np.abs(sim.positions()[..., 0] - flat[0][..., 0]).max() > 0.1  # while cells did move along it
+    sim.set_state(*tilted)
+    sim.advance(2 * steps)
+    across = sim.positions()[..., 1].mean(1) - tilted[0][..., 1].mean(1)
+    across = np.abs(np.mod(across + 5.0, 10.0) - 5.0)                      # periodic: the nearer image
+    assert across.max() > sc.width and across.mean() > 0.1                # cells left their rows

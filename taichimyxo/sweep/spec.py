@@ -134,7 +134,7 @@ class Sweep:
 
 def scene_key(scene: Scene, length: int = 10) -> str:
     """Hash of the resolved scene's values, names and title left out (the point's name is in the run's folder)."""
-    d = {sec: body for sec, body in scene.raw.items() if sec not in ("scene", "preview")}
+    d = scene.trajectory_values(exclude=("scene", "preview"))
     d["_dt"] = scene.dt
     return hashlib.sha1(json.dumps(d, sort_keys=True).encode()).hexdigest()[:length]
 
