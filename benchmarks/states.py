@@ -10,8 +10,8 @@
 - "S13 dense": S13 (60 x 60 µm, 1440 cells aligned at 4e7 cells/cm², area fraction ~1, flexible cells, active
   following, k_c = 0.002 N/m) after DENSE_WARM_STEPS steps of its 2 ms from its start, placed from the scene's seed
   with population.aligned_tilt_deg = 0: the start is a lattice at exactly W (almost no pair in contact), which
-  jams within that 0.6 s into real contacts everywhere, what the high-density scenes cost (benchmarks/results/dense_step.md). Its aligned rows hold no other
-  count near S3's 2000 cells at that density.
+  jams within that 0.6 s into real contacts everywhere, what the high-density scenes cost
+  (benchmarks/results/dense_step.md). Its aligned rows hold no other count near S3's 2000 cells at that density.
 
 `load(name)` gives (scene name, area multiple, start) for taichimyxo.bench.measure: start is (positions,
 engine_direction). `STATE_RUN[name]`: the run values a state is defined and
