@@ -78,7 +78,8 @@ FIGURES = {f.name: f for f in (
             Panel("B", {"guiding.kind": "none"}, "non-guided"),
             Panel("C", {"guiding.kind": "active"}, "active following")),
            "A: start; B: S11; C: S13",
-           "(A) Initial configuration: cells densely packed, aligned, oriented randomly. (B) Non-guided cells at 3 h. "
+           "(A) Initial configuration: cells densely packed, aligned (each turned by up to 1 degree, as the model "
+           "has no noise), oriented randomly. (B) Non-guided cells at 3 h. "
            "(C) Active following at 3 h. The paper notes its 60 µm domain may have been too small for rigid guided "
            "cells to form aggregates at this density (S12, S14); this figure shows flexible cells only.",
            {"half": "At half scale the box is 30 µm, 6 cell lengths: a circular movement wider than that cannot "
