@@ -32,7 +32,7 @@ def _polarities(scene, n):
 # Random sequential placement slows down sharply as the area fills (each new cell must land in the shrinking free
 # space). Tries per placed cell, averaged from the first, measured on 50 x 50 and 100 x 100 µm boxes: ~23 up to area
 # fraction 0.30, ~72 to 0.35, 300-350 to 0.40, 650-800 to 0.42, ~3900 to 0.44; beyond 0.44 no run placed every
-# cell. Scene.validate refuses random starts above 0.40 (scene.py, RANDOM_MAX_AREA_FRACTION) before anything is
+# cell. Scene.validate refuses random starts above 0.40 (schema.py, RANDOM_MAX_AREA_FRACTION) before anything is
 # placed, and the placement gives up after PLACEMENT_TRIES_PER_CELL tries per cell on average: about three times
 # what 0.40 needs, and a bounded time whatever the input (a few seconds per thousand cells).
 PLACEMENT_TRIES_PER_CELL = 1000

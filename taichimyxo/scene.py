@@ -16,12 +16,19 @@ from dataclasses import dataclass, field
 from .catalogue import SCENES_DIR, available_scenes, resolve_path  # noqa: F401  (re-exported)
 
 # the schema (every key, its default and check) and its errors; re-exported: `from taichimyxo.scene import SCHEMA`
-from .schema import SCHEMA, STIFFNESS_NAMES, SceneError, defaults, merge, parse_set, to_toml, toml_value  # noqa: F401
+from .schema import (  # noqa: F401
+    RANDOM_MAX_AREA_FRACTION,
+    SCHEMA,
+    STIFFNESS_NAMES,
+    SceneError,
+    check_scene,
+    defaults,
+    merge,
+    parse_set,
+    to_toml,
+    toml_value,
+)
 from .stability import default_dt_ms
-
-# The densest random start placed reliably and in bounded time (placement.py, "Random sequential placement": above
-# 0.40 the tries per cell climb from hundreds to thousands, and past 0.44 placement stalls).
-RANDOM_MAX_AREA_FRACTION = 0.40
 
 
 @dataclass(frozen=True)
@@ -107,51 +114,9 @@ class Scene:
     def validate(self) -> None:
         """Cross-key checks (single keys were checked on merge); errors say what --preview scaled."""
         try:
-            self._validate()
+            check_scene(self)
         except SceneError as e:
             raise SceneError(f"{e}{self.preview_note()}") from None
-
-    def _validate(self) -> None:
-        Lx, Ly = self.box
-        if min(Lx, Ly) < 2 * self.length:
-            raise SceneError(f"domain.width_um x domain.height_um = {Lx:g} x {Ly:g} µm: each side must be at least two "
-                             f"cell lengths (2 x cell.length_um = {2 * self.length:g} µm)")
-        if self.width >= self.length:
-            raise SceneError(f"cell.width_um = {self.width:g} must be smaller than cell.length_um = {self.length:g}")
-        if self.n_cells < 1:
-            raise SceneError(f"population gives {self.n_cells} cells in {Lx:g} x {Ly:g} µm; need at least 1")
-        af = self.area_fraction
-        limit = {"random": RANDOM_MAX_AREA_FRACTION, "aligned": 1.0 + 1e-9, "spiral": 0.9}[self.start]
-        if af > limit:
-            c = self.raw["population"]["cells"]
-            given = (f"population.cells = {c}" if c else
-                     f"population.density_cells_per_cm2 = {self.raw['population']['density_cells_per_cm2']:g} "
-                     f"({self.n_cells} cells in {Lx:g} x {Ly:g} µm)")
-            raise SceneError(f"{given} covers {af:.2f} of the area; the {self.start!r} start can place at most "
-                             f"{limit:.2f}")
-        if self.start == "spiral":
-            from .placement import spiral_capacity
-            cap = spiral_capacity(self)
-            if self.n_cells > cap:
-                raise SceneError(f"population: {self.n_cells} cells do not fit on a spiral in {Lx:g} x {Ly:g} µm "
-                                 f"(at most {cap})")
-        if self.dt <= 0:
-            raise SceneError("run.dt_ms resolved to zero")
-        if self.step_control == "error" and self.integrator != "explicit":
-            raise SceneError(f"run.step_control = 'error' needs run.integrator = 'explicit' (not "
-                             f"{self.integrator!r}): its error estimate is the explicit step's")
-        if self.hours * 3600 < self.dt:
-            raise SceneError(f"run.hours = {self.hours:g} is shorter than one step")
-        o = self.raw["output"]
-        if o["color_min"] or o["color_max"]:
-            if o["color"] not in ("speed", "strain"):
-                raise SceneError(f"output.color_min/color_max set a range for speed or strain; output.color = "
-                                 f"{o['color']!r} has no range")
-            if not o["color_max"] > o["color_min"]:
-                raise SceneError(f"output.color_max = {o['color_max']:g} must be above output.color_min = "
-                                 f"{o['color_min']:g}")
-            if o["color"] == "strain" and o["color_min"] <= 0:
-                raise SceneError("output.color_min must be positive for strain (a log scale), e.g. 1e-21")
 
     @property
     def color_range(self) -> dict:

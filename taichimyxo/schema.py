@@ -115,6 +115,10 @@ SCHEMA: dict[str, dict[str, tuple]] = {
     },
 }
 
+# The densest random start placed reliably and in bounded time (placement.py, "Random sequential placement": above
+# 0.40 the tries per cell climb from hundreds to thousands, and past 0.44 placement stalls).
+RANDOM_MAX_AREA_FRACTION = 0.40
+
 # the stiffness names the paper uses
 STIFFNESS_NAMES = {1e-18: "very flexible", 1e-17: "flexible", 1e-16: "rigid", 1e-15: "very rigid"}
 
@@ -245,3 +249,47 @@ def to_toml(scene) -> str:
             note = f"{doc}" + (f"; {notes[(sec, k)]}" if (sec, k) in notes and scene.raw[sec][k] == 0 else "")
             lines.append(f"{entry:<{width}}  # {note}")
     return "\n".join(lines) + "\n"
+
+
+def check_scene(scene) -> None:
+    """Cross-key checks of a resolved Scene (single keys were checked on merge); SceneError names the keys."""
+    Lx, Ly = scene.box
+    if min(Lx, Ly) < 2 * scene.length:
+        raise SceneError(f"domain.width_um x domain.height_um = {Lx:g} x {Ly:g} µm: each side must be at least two "
+                         f"cell lengths (2 x cell.length_um = {2 * scene.length:g} µm)")
+    if scene.width >= scene.length:
+        raise SceneError(f"cell.width_um = {scene.width:g} must be smaller than cell.length_um = {scene.length:g}")
+    if scene.n_cells < 1:
+        raise SceneError(f"population gives {scene.n_cells} cells in {Lx:g} x {Ly:g} µm; need at least 1")
+    af = scene.area_fraction
+    limit = {"random": RANDOM_MAX_AREA_FRACTION, "aligned": 1.0 + 1e-9, "spiral": 0.9}[scene.start]
+    if af > limit:
+        c = scene.raw["population"]["cells"]
+        given = (f"population.cells = {c}" if c else
+                 f"population.density_cells_per_cm2 = {scene.raw['population']['density_cells_per_cm2']:g} "
+                 f"({scene.n_cells} cells in {Lx:g} x {Ly:g} µm)")
+        raise SceneError(f"{given} covers {af:.2f} of the area; the {scene.start!r} start can place at most "
+                         f"{limit:.2f}")
+    if scene.start == "spiral":
+        from .placement import spiral_capacity
+        cap = spiral_capacity(scene)
+        if scene.n_cells > cap:
+            raise SceneError(f"population: {scene.n_cells} cells do not fit on a spiral in {Lx:g} x {Ly:g} µm "
+                             f"(at most {cap})")
+    if scene.dt <= 0:
+        raise SceneError("run.dt_ms resolved to zero")
+    if scene.step_control == "error" and scene.integrator != "explicit":
+        raise SceneError(f"run.step_control = 'error' needs run.integrator = 'explicit' (not "
+                         f"{scene.integrator!r}): its error estimate is the explicit step's")
+    if scene.hours * 3600 < scene.dt:
+        raise SceneError(f"run.hours = {scene.hours:g} is shorter than one step")
+    o = scene.raw["output"]
+    if o["color_min"] or o["color_max"]:
+        if o["color"] not in ("speed", "strain"):
+            raise SceneError(f"output.color_min/color_max set a range for speed or strain; output.color = "
+                             f"{o['color']!r} has no range")
+        if not o["color_max"] > o["color_min"]:
+            raise SceneError(f"output.color_max = {o['color_max']:g} must be above output.color_min = "
+                             f"{o['color_min']:g}")
+        if o["color"] == "strain" and o["color_min"] <= 0:
+            raise SceneError("output.color_min must be positive for strain (a log scale), e.g. 1e-21")
