@@ -196,11 +196,11 @@ def rebuilds(a) -> dict:
 def check_state(name: str):
     """(scene name, area multiple, positions, engine directions) of a forces-check state, the same whatever the code
     under test (states reached by stepping are stored the first time and reused)."""
+    from states import EXACT_ROWS
     from taichimyxo.placement import initial_configuration
     from taichimyxo.scene import Scene
-    exact_rows = {"population": {"aligned_tilt_deg": 0.0}}       # the aligned start these states were defined with
     if name in ("S13 start", "S11 start"):
-        sc = Scene.load(name.split()[0], exact_rows)
+        sc = Scene.load(name.split()[0], EXACT_ROWS)
         pos, ke = initial_configuration(sc)
         return sc.name, 1.0, pos, ke
     if name == "S3 guided" and os.environ.get("DENSE_STEP_S3_1H"):
@@ -213,7 +213,7 @@ def check_state(name: str):
         from taichimyxo.bench import scaled_scene
         from taichimyxo.simulation import Simulation
         sc = scaled_scene(scene, area, run={"integrator": "explicit", "dt_ms": 2})               # as first measured
-        sim = Simulation(sc.with_overrides(exact_rows) if sc.start == "aligned" else sc)
+        sim = Simulation(sc.with_overrides(EXACT_ROWS) if sc.start == "aligned" else sc)
         sim.advance(steps)
         np.savez(store, positions=sim.positions(), engine_direction=sim.engine_direction())
         sim.close()

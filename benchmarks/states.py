@@ -31,6 +31,8 @@ STATE_DIR = HERE / "states"
 S3_1H = STATE_DIR / "S3-1h.npz"
 SWEEP = HERE.parent / "sweeps" / "bench_states.toml"
 STATES = ("S3 1 h", "S13 dense")
+# the aligned start the dense states were defined with: rows at exactly W (the scenes' own start tilts each cell)
+EXACT_ROWS = {"population": {"aligned_tilt_deg": 0.0}}
 DENSE_WARM_STEPS = 300
 # the explicit 2 ms step the dense state was defined with, so its rows compare with the earlier ones and with LAMMPS
 STATE_RUN = {"S13 dense": {"integrator": "explicit", "dt_ms": 2.0}}
@@ -44,10 +46,9 @@ def load(name: str):
         z = np.load(S3_1H)
         return "S3", 1.0, (z["positions"], z["engine_direction"])
     if name == "S13 dense":
-        # the start the state was defined with: the exact lattice (the scene's own start tilts each cell)
         from taichimyxo.placement import initial_configuration
         from taichimyxo.scene import Scene
-        return "S13", 1.0, initial_configuration(Scene.load("S13", {"population": {"aligned_tilt_deg": 0.0}}))
+        return "S13", 1.0, initial_configuration(Scene.load("S13", EXACT_ROWS))
     raise SystemExit(f"states: unknown state {name!r}; known: {', '.join(STATES)}")
 
 

@@ -221,8 +221,7 @@ def test_dense_non_guided_rows_leave_their_lanes_only_from_a_tilted_start(small_
     across than the row spacing, as the paper's S11 shows no pattern (docs/model.md "Initial configurations")."""
     sc = small_scene(0, box=(10.0, 10.0), population={"start": "aligned", "density_cells_per_cm2": 4e7},
                      collisions={"k_c_N_per_m": 0.002}, run={"dt_ms": 2.0})
-    flat = initial_configuration(Scene.from_dict({**sc.to_dict(), "population": {
-        **sc.to_dict()["population"], "aligned_tilt_deg": 0.0}}))
+    flat = initial_configuration(sc.with_overrides({"population": {"aligned_tilt_deg": 0.0}}))
     tilted = initial_configuration(sc)
     sim = make_sim(sc, *flat)
     steps = int(round(30.0 / sc.dt))
