@@ -613,8 +613,10 @@ def test_claims_table_on_synthetic_runs(tmp_path):
                           "edge_speed_vs_size", "aggregate_lifetimes", "strain_inside_vs_outside",
                           "stiffness_clusters_non_guided", "stiffness_aggregates_larger_fewer",
                           "stiffness_very_flexible_many_small_stable", "stiffness_very_rigid_none",
-                          "spiral_stability"]
+                          "spiral_stability", "dense_circular_movement", "dense_straight_streams",
+                          "dense_stream_speedup"]
     assert rows["spiral_stability"]["status"].startswith("not measurable here")
+    assert all(rows[k]["status"].startswith("not measurable here") for k in rows if k.startswith("dense_"))
     assert {r["kind"] for r in res["runs"]} == {"active", "passive", "non-guided"}
     # free (gas) cells move at v_b
     assert rows["free_cell_speed"]["status"] == "consistent"
@@ -640,12 +642,12 @@ def test_claims_table_on_synthetic_runs(tmp_path):
     assert st["status"] == "consistent" and st["values"]["act"]["ratio"] > 10 and list(st["values"]) == ["act"]
     # the files: markdown with a row per claim, CSV, JSON and the plots
     md = (out / "claims.md").read_text()
-    assert md.count("\n| ") == 16            # header + 15 claims
+    assert md.count("\n| ") == 19            # header + 18 claims
     with open(out / "claims.csv") as f:
         import csv
-        assert len(list(csv.reader(f))) == 16
+        assert len(list(csv.reader(f))) == 19
     j = json.load(open(out / "claims.json"))
-    assert len(j["claims"]) == 15 and j["runs"][0]["label"] == "act"
+    assert len(j["claims"]) == 18 and j["runs"][0]["label"] == "act"
     pngs = [f for f in res["files"] if f.endswith(".png")]
     assert len(pngs) >= 5 and all(os.path.getsize(p) > 1000 for p in pngs)
     assert rows["edge_speed_vs_size"]["plot_file"].endswith("claims.edge_vs_radius.png")

@@ -377,6 +377,53 @@ def test_spiral_statement_judged_on_rigid_and_flexible_runs():
         "not measurable here")
 
 
+# ------------------------------------------------------------------------------------------------ dense (Fig 3)
+def test_dense_statements_judged_on_aligned_runs():
+    """High density (Fig 3, S11-S14): a run from the aligned packing is its own kind. Guided flexible runs with
+    more of their cells in stable rotating aggregates than non-guided ones: circular movement consistent; rigid runs
+    more nematic than flexible ones: straight streams consistent; active runs with more fast cells and p95 above v_b:
+    speed-up consistent. Reversed orderings are not consistent; missing runs or runs under an hour are not
+    measurable, naming the scenes that would measure them."""
+    from taichimyxo.analysis.claim_runs import run_kind
+    from taichimyxo.analysis.dense import dense_record, dense_rows
+    assert run_kind({"population": {"start": "aligned"}, "guiding": {"kind": "active"}}) == "dense"
+    assert run_kind({"population": {"start": "random"}, "guiding": {"kind": "active"}}) == "active"
+    edges = [0.5 * i for i in range(17)]
+
+    def rec(label, guiding, ka, frac, nem, fast, p95, minutes=180, long_lived=0.8):
+        t = list(range(0, minutes + 1, 10))
+        n = len(t)
+        counts = [0.0] * 16
+        counts[7], counts[10] = 1 - fast, fast            # 3.5-4 and 5-5.5 µm/min
+        summary = {"timeseries": {"time_min": t, "fraction_in_aggregates": [frac] * n, "nematic_order": [nem] * n,
+                                  "speed_p95_um_per_min": [4.0 * p95 + 0.01 * (i % 2) for i in range(n)]},
+                   "speed_histograms": {"bin_edges_um_per_min": edges, "inside_aggregates": [0.0] * 16,
+                                        "outside_aggregates": counts},
+                   "lifetimes": {"fraction_aggregate_frames_long_lived": long_lived}}
+        return dense_record(label, {"guiding": {"kind": guiding}, "cell": {"k_a_N_m": ka}}, summary, 4.0)
+
+    s11, s13 = rec("S11", "none", 1e-17, 0.02, 0.2, 0.05, 1.05), rec("S13", "active", 1e-17, 0.3, 0.1, 0.3, 1.5)
+    s12, s14 = rec("S12", "none", 1e-15, 0.0, 0.8, 0.02, 1.0), rec("S14", "active", 1e-15, 0.0, 0.7, 0.4, 1.8)
+    m = s13["measures"]
+    assert m["fraction_in_aggregates"] == pytest.approx(0.3) and m["fast_fraction"] == pytest.approx(0.3)
+    assert m["fast_above_um_per_min"] == 4.5 and m["speed_p95_vb"] == pytest.approx(1.50125, abs=1e-3)
+    assert m["hours"] == 3.0 and m["from_min"] == 150            # the last quarter: 4 of 19 frames
+
+    def status(*recs):
+        return {r["id"]: r["status"] for r in dense_rows(list(recs))}
+
+    assert set(status(s11, s12, s13, s14).values()) == {"consistent"}
+    flipped = status(rec("S11", "none", 1e-17, 0.4, 0.9, 0.5, 1.05), s12, s13, s14)
+    assert set(flipped.values()) == {"not consistent"}
+    unstable = rec("S13", "active", 1e-17, 0.3, 0.1, 0.3, 1.5, long_lived=0.2)
+    assert status(s11, unstable)["dense_circular_movement"] == "not consistent"
+    only = status(s11, s13)
+    assert only["dense_straight_streams"].startswith("not measurable here") and "S12" in \
+        only["dense_straight_streams"] and "S14" in only["dense_straight_streams"]
+    short = status(s11, rec("S13", "active", 1e-17, 0.3, 0.1, 0.3, 1.5, minutes=30))
+    assert short["dense_circular_movement"].startswith("not measurable here")
+
+
 def test_dry_run_estimates_from_finished_runs_when_kept(tmp_path, capsys):
     """A finished one-thread run kept as a record gives the estimate for runs of its kind of scene: its whole run's
     particle-steps per second, formed states included, instead of the start-state benchmark x a factor."""

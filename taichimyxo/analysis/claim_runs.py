@@ -19,14 +19,19 @@ KINDS = {  # kind -> (label, the scene to run for it)
     "adhesion": ("adhesion", "S4 (guiding.kind = adhesion)"),
     "slime": ("slime trails", "S16 or S17 (slime.enabled = true)"),
     "spiral": ("spiral start", "S9 or S10 (population.start = spiral)"),
+    "dense": ("high-density aligned start", "S11-S14 (population.start = aligned)"),
 }
 
 
 def run_kind(scene: dict) -> str:
     """The guiding of a stored scene: slime (slime trails on), else guiding.kind (none -> non-guided); a run that
-    started as a prearranged spiral is its own experiment (S6 Fig), not a random start's."""
-    if (scene.get("population") or {}).get("start") == "spiral":
+    started as a prearranged spiral (S6 Fig) or from the dense aligned packing (Fig 3) is its own experiment, not a
+    random low-density start's."""
+    start = (scene.get("population") or {}).get("start")
+    if start == "spiral":
         return "spiral"
+    if start == "aligned":
+        return "dense"
     if (scene.get("slime") or {}).get("enabled"):
         return "slime"
     k = str((scene.get("guiding") or {}).get("kind", "none"))
@@ -83,6 +88,15 @@ def runs_of(runs, *kinds):
 
 def stable_tracks(r):
     return [t for t in r["summary"]["tracks"] if t["stable"]]
+
+
+def speed_span_min(r) -> float:
+    """Minutes from a run's first analysed frame with speeds to its last (the first frame of a run has none)."""
+    m = r["summary"]["meta"]
+    t0, t1 = m["time_range_min"]
+    without = set(m.get("frames_without_speed_min") or [])
+    first = min((t for t in r["summary"]["timeseries"]["time_min"] if t not in without), default=t1)
+    return float(t1 - max(t0, first))
 
 
 def free_speed(r):

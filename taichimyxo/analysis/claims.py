@@ -26,12 +26,11 @@ below 8 frames), "± SE over tracks" over aggregates followed in time:
    2). Consistent when the median over active following and adhesion runs is >= 0.5 (RIGID_EXPONENT). The R² of
    v = omega x (r - c) cannot be the test: cells all at v_b on circles pass it at 0.89-0.97.
 5-7. edge_speed_active / _adhesion / _slime: edge speed (mean speed of the outermost ring of segments, one cell
-   width inside the aggregate's outer radius R) / v_b,
-   time mean per track seen in >= ``min_track_frames`` frames, mean ± SE over tracks; beside it the free-cell
-   speed of the same runs. Paper: up to 4 v_b with active following, (4/3) v_b with adhesion (rigid-body model,
-   S2 Text), about v_b with slime trails; edge faster than a free cell for short-range guiding. Consistent: active
-   above the free-cell speed by 2 SE and at most 4 v_b + 2 SE; adhesion within 10 % or 2 SE of 4/3 and above the
-   free cells; slime within 10 % or 2 SE of 1.
+   width inside the aggregate's outer radius R) / v_b, time mean per track seen in >= ``min_track_frames`` frames,
+   mean ± SE over tracks; beside it the free-cell speed of the same runs. Paper: up to 4 v_b with active
+   following, (4/3) v_b with adhesion (rigid-body model, S2 Text), about v_b with slime trails; edge faster than a
+   free cell for short-range guiding. Consistent: active above the free-cell speed by 2 SE and at most 4 v_b + 2 SE;
+   adhesion within 10 % or 2 SE of 4/3 and above the free cells; slime within 10 % or 2 SE of 1.
 8. edge_speed_vs_size: per kind (active following, adhesion), OLS slope of the tracks' edge speed against their
    radius with its SE. Consistent (size-independent) when |slope / SE| < 2 with >= 3 tracks.
 9. aggregate_lifetimes: tracks linked by shared cells (tracking.py); per run the median and longest lifetime and
@@ -47,6 +46,8 @@ below 8 frames), "± SE over tracks" over aggregates followed in time:
    stiffnesses a statement compares, or with runs shorter than an hour.
 15. spiral_stability: prearranged spiral aggregates (S9, S10: their own kind of run, "spiral start"): the largest
    aggregate's share of the cells and aggregates per frame at the end, rigid against flexible (spiral.py).
+16-18. dense_circular_movement, dense_straight_streams, dense_stream_speedup: the high-density statements (Fig 3,
+   S11-S14: runs from the aligned start, their own kind "dense"), judged as dense.py says.
 A claim the runs given cannot support (too short, too small) says "not measurable here" and why, not a verdict.
 """
 from __future__ import annotations
@@ -69,9 +70,11 @@ from .claim_runs import (
     needs,
     plus_minus,
     runs_of,
+    speed_span_min,
     stable_tracks,
 )
 from .claims_table import COLUMNS, format_claims, to_csv, to_markdown, write_complete  # noqa: F401
+from .dense import dense_record, dense_rows
 from .spiral import spiral_measures, spiral_row
 from .stats import series_mean_se
 from .stiffness import records_from_runs, stiffness_rows
@@ -89,15 +92,6 @@ def _row(cid, claim, paper, runs, measured, status, values, plot=None):
     return dict(id=cid, claim=claim, measured=measured, paper=paper,
                 runs="; ".join(_describe(r) for r in runs) if runs else "none", status=status,
                 values=values, plot=plot)
-
-
-def _speed_span_min(r) -> float:
-    """Minutes from a run's first analysed frame with speeds to its last (the first frame of a run has none)."""
-    m = r["summary"]["meta"]
-    t0, t1 = m["time_range_min"]
-    without = set(m.get("frames_without_speed_min") or [])
-    first = min((t for t in r["summary"]["timeseries"]["time_min"] if t not in without), default=t1)
-    return float(t1 - max(t0, first))
 
 
 # The claims in table order: id -> function(runs, shared) returning its row, or its rows (a claim may give several).
@@ -311,7 +305,7 @@ def aggregate_lifetimes(runs, shared):
     stable_min = runs[0]["summary"]["parameters"]["stable_lifetime_min"] if runs else 10
     # a run whose frames with speeds span less than the lifetime asked for cannot show one (its 0 % would be the
     # run's, not the cells')
-    span = [_speed_span_min(r) for r in runs_of(runs, "passive", "active", "adhesion")]
+    span = [speed_span_min(r) for r in runs_of(runs, "passive", "active", "adhesion")]
     status = (needs(*([] if pas else ["passive"]) + ([] if act else ["active"])) if not (pas and act) else
               f"not measurable here: a run with {min(span):.1f} min of measured speeds cannot show a lifetime of "
               f"{stable_min:g} min (needs longer runs)" if min(span) < stable_min else
@@ -371,6 +365,15 @@ def spiral_stability(runs, shared):
                 "aggregates of rigid cells stay relatively stable, losing some cells; those of flexible cells split "
                 "into several smaller aggregates and swirling streams (S6 Fig, S9 and S10 Video)", rs,
                 row["measured"], row["status"], row["values"])
+
+
+@claim("dense")
+def dense(runs, shared):
+    """The high-density statements (Fig 3, S11-S14): three rows (dense.py)."""
+    rs = runs_of(runs, "dense")
+    recs = [dense_record(r["label"], r["scene"], r["summary"], r["v_b"]) for r in rs]
+    return [_row(x["id"], x["claim"], x["paper"], [r for r in rs if r["label"] in x["labels"]], x["measured"],
+                 x["status"], x["values"]) for x in dense_rows(recs)]
 
 
 def evaluate(runs: list[dict]) -> list[dict]:
