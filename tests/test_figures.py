@@ -425,8 +425,9 @@ def test_dense_statements_judged_on_aligned_runs():
 
 
 def test_dry_run_estimates_from_finished_runs_when_kept(tmp_path, capsys):
-    """A finished one-thread run kept as a record gives the estimate for runs of its kind of scene: its whole run's
-    particle-steps per second, formed states included, instead of the start-state benchmark x a factor."""
+    """A finished one-thread run kept as a record gives the estimate for runs of its kind of scene and integrator:
+    its whole run's particle-steps per second, formed states included, instead of the start-state benchmark x a
+    factor."""
     from taichimyxo.figures.plan import bench_rates, measured_rates, run_seconds
     from taichimyxo.figures.records import record_path, write_record
     out, records = tmp_path / "figs", tmp_path / "kept"
@@ -439,9 +440,12 @@ def test_dry_run_estimates_from_finished_runs_when_kept(tmp_path, capsys):
                                    "wall_seconds_total": sc.steps * 1000 / 2e6, "scene_values": sc.to_dict()}))
     write_record(record_path(records, runs, pt), runs.trajectory(pt), None, summary, first=False)
     measured = measured_rates(records)
-    assert list(measured.values()) == [[(1000, 2e6)]]
+    assert measured == {("S3", "explicit"): [(1000, 2e6)]}
     other = runs.points[1].scene
     assert run_seconds(other, bench_rates(), measured) == other.steps * other.n_cells * other.N / 2e6
+    # an imex run of the same kind is not priced by an explicit run's cost per step
+    imex = other.with_overrides({"run": {"integrator": "imex-explicit"}})
+    assert run_seconds(imex, bench_rates(), measured) != imex.steps * imex.n_cells * imex.N / 2e6
     assert main(["figures", "S6Fig", "--scale", "half", "--out", str(out), "--records", str(records),
                  "--dry-run"]) == 0
     assert "the particle-steps/s of the 1 finished run kept in" in capsys.readouterr().out

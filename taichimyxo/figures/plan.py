@@ -199,8 +199,14 @@ def bench_rates(path: Path = THROUGHPUT_CSV) -> dict:
     return out
 
 
+def _measured_kind(scene) -> tuple:
+    """Runs whose measured cost stands for each other's: the same kind of scene and integrator (an imex step costs
+    several explicit ones)."""
+    return _bench_scene(scene), scene.integrator
+
+
 def measured_rates(records: Path | None) -> dict:
-    """benchmark scene kind -> [(particles, particle-steps/s)] of finished figure runs kept as records
+    """(benchmark scene kind, integrator) -> [(particles, particle-steps/s)] of finished figure runs kept as records
     (taichimyxo.figures.records) that ran on one CPU thread: whole runs, formed states included."""
     out: dict = {}
     if records is None or not Path(records).is_dir():
@@ -215,18 +221,18 @@ def measured_rates(records: Path | None) -> dict:
             scene = Scene.from_dict(s["scene_values"])
         except (OSError, ValueError, KeyError, SceneError):
             continue
-        out.setdefault(_bench_scene(scene), []).append(
+        out.setdefault(_measured_kind(scene), []).append(
             (int(s["particles"]), s["steps"] * s["particles"] / s["wall_seconds_total"]))
     return out
 
 
 def run_seconds(scene, rates: dict, measured: dict | None = None) -> float | None:
     """Estimated wall seconds of one run on one thread: its steps x particles at the rate of finished runs of the
-    same kind of scene (`measured`, measured_rates) at the nearest size, else at the benchmark's rate times
-    FORMED_STATE_FACTOR; None without either."""
+    same kind of scene and integrator (`measured`, measured_rates) at the nearest size, else at the benchmark's
+    rate times FORMED_STATE_FACTOR; None without either."""
     particles = scene.n_cells * scene.N
     nearest = lambda rows: min(rows, key=lambda r: abs(math.log(r[0] / max(particles, 1))))[1]   # noqa: E731
-    rows = (measured or {}).get(_bench_scene(scene))
+    rows = (measured or {}).get(_measured_kind(scene))
     if rows:
         return scene.steps * particles / nearest(rows)
     rows = rates.get(_bench_scene(scene)) or rates.get("S3")
