@@ -36,6 +36,7 @@ from .writers import (
     ProgressLine,
     Summary,
     Trajectory,
+    previous_sessions,
     read_checkpoint,
     scene_render_options,
 )
@@ -147,7 +148,8 @@ def run_scene(scene: Scene, out_dir: str = "videos", arch: str = "cpu", resume: 
     setup_s = time.perf_counter() - t_setup
 
     attached = scene_writers(scene, files, resumed=ckpt is not None, progress=progress,
-                             checkpoint_every_s=checkpoint_every_s, setup_seconds=setup_s, arch=used_arch)
+                             checkpoint_every_s=checkpoint_every_s, setup_seconds=setup_s, arch=used_arch,
+                             before=previous_sessions(files["json"], scene, ckpt) if ckpt is not None else None)
     movie = next((w for w in attached if isinstance(w, Movie)), None)
     if movie is not None and ckpt is not None and files["gsd"].is_file():
         from .trajectory import read_frames
@@ -167,11 +169,13 @@ def run_scene(scene: Scene, out_dir: str = "videos", arch: str = "cpu", resume: 
 
 
 def scene_writers(scene: Scene, files: dict, *, resumed: bool = False, progress: bool = True,
-                  checkpoint_every_s: float = 300.0, setup_seconds: float = 0.0, arch: str = "cpu") -> list:
+                  checkpoint_every_s: float = 300.0, setup_seconds: float = 0.0, arch: str = "cpu",
+                  before: dict | None = None) -> list:
     """The writers a scene's run attaches (what a user would build): the invariant check at every frame, the
     progress line, the trajectory (every output.trajectory_interval_min) and the movie (every
     output.frame_interval_min), both also at the last step, the checkpoint (every checkpoint_every_s of wall
-    clock, on interruption and on a broken invariant), the last-frame panel and the summary."""
+    clock, on interruption and on a broken invariant), the last-frame panel and the summary. before: a resumed run's
+    totals over its earlier sessions (writers.previous_sessions)."""
     write_movie = scene.movie
     look = scene_render_options(scene)
     attached = [InvariantCheck()]
@@ -184,12 +188,12 @@ def scene_writers(scene: Scene, files: dict, *, resumed: bool = False, progress:
         size = scene.video_size
         attached.append(Movie(files["mp4"], Periodic(steps=scene.frame_every_steps), final=True, size=size,
                               fps=scene.fps, **look))
-    attached.append(Checkpoint(files["ckpt"], WallClock(seconds=checkpoint_every_s)))
+    attached.append(Checkpoint(files["ckpt"], WallClock(seconds=checkpoint_every_s), before=before))
     if write_movie:
         attached.append(FigurePanel(files["png"], **look))        # the panel `render` writes too
     listed = {k: v for k, v in files.items() if k != "ckpt" and (k in ("gsd", "json") or write_movie)}
     attached.append(Summary(files["json"], files=listed, checkpoint=files["ckpt"], resumed=resumed,
-                            setup_seconds=setup_seconds, arch=arch))
+                            setup_seconds=setup_seconds, arch=arch, before=before))
     return attached
 
 

@@ -126,32 +126,38 @@ def scene_render_options(scene) -> dict:
 # ------------------------------------------------------------------------------------------------ checkpoints
 class Checkpoint(Writer):
     """The full state as npz (positions, speed window, clocks, slime; see Simulation.get_checkpoint) with the
-    scene's fingerprint: on `trigger` (wall clock), on interruption and on a broken invariant. Written atomically
-    (a temporary file, then renamed)."""
+    scene's fingerprint and the run's wall-time totals up to that state (session_totals; `before`: the earlier
+    sessions' totals, previous_sessions): on `trigger` (wall clock), on interruption and on a broken invariant.
+    Written atomically (a temporary file, then renamed). A session killed without a summary resumes from here with
+    its wall time up to the checkpoint counted."""
 
-    def __init__(self, path, trigger=None, *, remove_when_completed: bool = True):
+    def __init__(self, path, trigger=None, *, remove_when_completed: bool = True, before: dict | None = None):
         self.path = Path(path)
         self.trigger = trigger if trigger is not None else WallClock(seconds=300)
         self.remove_when_completed = remove_when_completed
+        self.before = dict(before or {})
 
     def start(self, run) -> None:
         if hasattr(self.trigger, "restart"):
             self.trigger.restart()
 
     def write(self, run) -> None:
-        write_checkpoint(run.sim, self.path)
+        write_checkpoint(run.sim, self.path, session_totals(self.before, sum(run.wall_by_hour), run.wall_by_hour))
 
     def finish(self, run) -> None:
         if run.status in ("interrupted", "failed"):
-            write_checkpoint(run.sim, self.path)
+            write_checkpoint(run.sim, self.path, session_totals(self.before, run.wall_seconds, run.wall_by_hour))
         elif self.remove_when_completed and self.path.is_file():
             self.path.unlink()
 
 
-def write_checkpoint(sim, path: Path) -> None:
+def write_checkpoint(sim, path: Path, totals: dict | None = None) -> None:
+    """totals: the run's wall-time totals up to this state (session_totals), stored beside it."""
     import numpy as np
     st = sim.get_checkpoint()
     st["fingerprint"] = np.array(sim.scene.fingerprint())
+    for k, v in (totals or {}).items():
+        st[k] = np.asarray(v, np.int64 if k == "sessions" else np.float64)
     tmp = path.with_name(path.name + ".tmp.npz")
     np.savez(tmp, **st)
     os.replace(tmp, path)
@@ -261,8 +267,24 @@ class ProgressLine(Writer):
             self.bar = None
 
 
-def previous_sessions(path: Path, scene) -> dict:
-    """Totals of the earlier sessions of this run (from the summary an interrupted session wrote)."""
+# what a checkpoint stores beside the state: how long the run took to reach it, not part of the state
+SESSION_KEYS = ("wall_seconds_total", "sessions", "wall_seconds_by_hour")
+
+
+def session_totals(before: dict, wall: float, by_hour: list) -> dict:
+    """The run's totals over its sessions: the earlier ones' (`before`, previous_sessions) and this one's so far."""
+    return {"wall_seconds_total": before.get("wall_seconds_total", 0.0) + wall,
+            "sessions": before.get("sessions", 0) + 1,
+            "wall_seconds_by_hour": _add_lists(before.get("wall_seconds_by_hour", []), by_hour)}
+
+
+def previous_sessions(path: Path, scene, checkpoint: dict | None = None) -> dict:
+    """Totals of the earlier sessions of this run: those stored in the checkpoint it resumes from (its wall time up
+    to that state, even when the session was killed), else those of the summary an interrupted session wrote."""
+    if checkpoint is not None and "wall_seconds_total" in checkpoint:
+        return {"wall_seconds_total": float(checkpoint["wall_seconds_total"]),
+                "sessions": int(checkpoint["sessions"]),
+                "wall_seconds_by_hour": [float(w) for w in checkpoint["wall_seconds_by_hour"]]}
     try:
         d = json.loads(path.read_text())
     except (OSError, ValueError):
@@ -290,28 +312,30 @@ def _load_average() -> float | None:
 class Summary(Writer):
     """The JSON run summary, written when the run ends (any status). files: the outputs to list (name -> Path);
     checkpoint: the checkpoint's path, listed when the run did not complete; resumed: this session continued an
-    interrupted one (the totals add the earlier sessions'); setup_seconds, arch: how the simulation was built."""
+    interrupted one (the totals add the earlier sessions': `before`, previous_sessions, else read from the summary
+    it wrote); setup_seconds, arch: how the simulation was built."""
     order = 1
 
     def __init__(self, path, *, files: dict | None = None, checkpoint=None, resumed: bool = False,
-                 setup_seconds: float = 0.0, arch: str = "cpu"):
+                 setup_seconds: float = 0.0, arch: str = "cpu", before: dict | None = None):
         self.path, self.files, self.checkpoint = Path(path), dict(files or {}), checkpoint
-        self.resumed, self.setup_seconds, self.arch = resumed, setup_seconds, arch
+        self.resumed, self.setup_seconds, self.arch, self.before = resumed, setup_seconds, arch, before
         self.summary = None
 
     def finish(self, run) -> None:
-        self.summary = run_summary(run, self.path, self.files, self.checkpoint, self.resumed, self.setup_seconds,
-                                   self.arch)
+        before = (self.before if self.before is not None else previous_sessions(self.path, run.sim.scene)) \
+            if self.resumed else {}
+        self.summary = run_summary(run, self.files, self.checkpoint, before, self.setup_seconds, self.arch)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.path.write_text(json.dumps(self.summary, indent=1))
 
 
-def run_summary(run, path: Path, files: dict, checkpoint, resumed: bool, setup_s: float, arch: str) -> dict:
+def run_summary(run, files: dict, checkpoint, before: dict, setup_s: float, arch: str) -> dict:
     from . import backend
     sim = run.sim
     scene = sim.scene
     status, wall = run.status, run.wall_seconds
-    before = previous_sessions(path, scene) if resumed else {}
+    totals = session_totals(before, wall, run.wall_by_hour)
     summary = {
         "summary_version": SUMMARY_VERSION,
         "scene": scene.name, "title": scene.title, "paper_figure": scene.paper_figure,
@@ -320,14 +344,13 @@ def run_summary(run, path: Path, files: dict, checkpoint, resumed: bool, setup_s
         "box_um": list(scene.box), "dt_s": scene.dt,
         # totals since the start of the run (over every session, when it was interrupted and resumed)
         "steps": sim.step_count, "simulated_seconds": sim.time,
-        "wall_seconds_total": before.get("wall_seconds_total", 0.0) + wall,
-        "sessions": before.get("sessions", 0) + 1,
+        "wall_seconds_total": totals["wall_seconds_total"], "sessions": totals["sessions"],
         # this session (this process) alone: the rate pairs its steps with its wall time
         "steps_this_session": sim.step_count - run.start_step,
         "simulated_seconds_this_session": (sim.step_count - run.start_step) * scene.dt,
         "wall_seconds": wall, "setup_seconds": setup_s,
         # wall seconds each simulated hour cost (index = hour; over every session): the cost grows as the state forms
-        "wall_seconds_by_hour": _add_lists(before.get("wall_seconds_by_hour", []), run.wall_by_hour),
+        "wall_seconds_by_hour": totals["wall_seconds_by_hour"],
         "particle_steps_per_second": run.steps_done * sim.n_p / max(wall, 1e-9),
         "frame_interval_s": scene.frame_every_steps * scene.dt,
         "trajectory_interval_s": scene.trajectory_every_steps * scene.dt,

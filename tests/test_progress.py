@@ -54,6 +54,28 @@ def test_summary_after_resume_pairs_this_sessions_steps_with_its_wall_time(ti_cp
     assert "; run total over 2 sessions: 3600 steps, 3.6 s simulated" in line
 
 
+def test_a_session_killed_before_its_summary_still_counts_its_wall_time(ti_cpu, tmp_path):
+    """A session killed outright writes no summary; the run resumes from its last checkpoint, which stores the run's
+    wall-time totals up to that state, so the resumed run's totals (and the figures' cost estimates made from them)
+    still count that session's time."""
+    import numpy as np
+
+    from taichimyxo.scene_run import run_scene
+    sc = build_small_scene(4, run={"hours": 0.001, "dt_ms": 1.0})               # 3600 steps
+    out = tmp_path / "out"
+    first = run_scene(sc, out_dir=out, stop_after_steps=1000, progress=False)
+    (ckpt,) = out.glob("*.ckpt.npz")
+    stored = np.load(ckpt)
+    assert int(stored["sessions"]) == 1
+    assert float(stored["wall_seconds_total"]) == pytest.approx(first["wall_seconds"])
+    assert float(np.sum(stored["wall_seconds_by_hour"])) > 0
+    for summary in out.glob("*.json"):
+        summary.unlink()                                                        # killed: no summary
+    rest = run_scene(sc, out_dir=out, resume=True, progress=False)
+    assert rest["completed"] and rest["sessions"] == 2
+    assert rest["wall_seconds_total"] == pytest.approx(first["wall_seconds"] + rest["wall_seconds"])
+
+
 def test_summary_splits_the_wall_time_by_simulated_hour_over_sessions(make_sim, tmp_path):
     """wall_seconds_by_hour: the wall time each simulated hour cost, added over the sessions of a resumed run."""
     from taichimyxo.run_loop import drive
