@@ -76,7 +76,7 @@ from .claim_runs import (
 from .claims_table import COLUMNS, format_claims, to_csv, to_markdown, write_complete  # noqa: F401
 from .dense import dense_record, dense_rows
 from .spiral import spiral_measures, spiral_row
-from .stats import series_mean_se
+from .stats import late_start, series_mean_se
 from .stiffness import records_from_runs, stiffness_rows
 from .summary import json_clean
 from .tracking import size_regression
@@ -160,7 +160,7 @@ def fraction_in_aggregates(runs, shared):
     for r in runs:
         f = np.asarray(r["summary"]["timeseries"]["fraction_in_aggregates"], float)
         t = np.asarray(r["summary"]["timeseries"]["time_min"], float)
-        q = slice(len(f) - max(1, len(f) // 4), None)
+        q = slice(late_start(len(f)), None)
         sd = float(f[q].std(ddof=1)) if len(f[q]) > 1 else float("nan")
         vals[r["label"]] = dict(kind=r["kind"], mean=float(f[q].mean()), sd=sd, final=float(f[-1]),
                                 from_min=float(t[q][0]), to_min=float(t[-1]))

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .stats import series_mean_se
+from .stats import late_start, series_mean_se
 
 FLEXIBLE_KA, RIGID_KA, VERY_RIGID_KA = 1e-17, 1e-16, 1e-15      # N·m
 FAST_VB = 1.1               # "faster than v_b": above the speed a free cell keeps, with the histogram's bin width
@@ -39,7 +39,7 @@ GUIDED = ("active", "adhesion")
 
 def _late(x) -> np.ndarray:
     a = np.asarray(x, float)
-    return a[len(a) - max(1, len(a) // 4):]
+    return a[late_start(len(a)):]
 
 
 def _mean_sd(x) -> tuple[float, float]:

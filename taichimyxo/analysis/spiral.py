@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .stats import late_start
+
 RIGID_KA, FLEXIBLE_KA = 1e-16, 1e-17          # N·m: the paper's "rigid" and "flexible" (docs/model.md)
 MIN_HOURS = 1.0
 
@@ -25,7 +27,7 @@ def spiral_measures(summary: dict, n_cells: int) -> dict:
     t = [float(x) for x in ts["time_min"]]
     if not t:
         return dict(n_aggregates=None, largest_fraction=None, hours=0.0)
-    late = t[len(t) - max(1, len(t) // 4):]
+    late = t[late_start(len(t)):]
     largest = {round(x, 6): 0 for x in late}
     for tr in summary.get("tracks", []):
         for tm, n in zip(tr["series"]["time_min"], tr["series"]["n_cells"]):

@@ -1,10 +1,16 @@
-"""The statistics the analysis needs: ordinary least squares, a rigid-rotation fit, a binomial tail and the standard
-error of a time series's mean (batch means)."""
+"""The statistics the analysis needs: ordinary least squares, a rigid-rotation fit, a binomial tail, the standard
+error of a time series's mean (batch means) and the late window every run's outcome is averaged over."""
 from __future__ import annotations
 
 import math
 
 import numpy as np
+
+
+def late_start(n: int) -> int:
+    """The index of the first of the last quarter of n frames (at least one frame): a run's outcomes are means over
+    its late window, after the aggregates have formed (docs/figures.md)."""
+    return n - max(1, n // 4)
 
 
 def ols(x, y):

@@ -27,6 +27,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .stats import late_start
+
 STIFFNESS = {1e-18: "very flexible", 1e-17: "flexible", 1e-16: "rigid", 1e-15: "very rigid"}
 MEASURES = {
     "n_aggregates": "rotating aggregates per frame",
@@ -49,7 +51,7 @@ def run_measures(summary: dict) -> dict:
     """The measures of one run (module docstring) from its analysis summary, with its simulated hours."""
     ts = summary["timeseries"]
     t = np.asarray(ts["time_min"], float)
-    q0 = len(t) - max(1, len(t) // 4)
+    q0 = late_start(len(t))
     t_from = float(t[q0]) if len(t) else 0.0
     cells = [n for tr in summary.get("tracks", []) for tm, n in zip(tr["series"]["time_min"],
                                                                     tr["series"]["n_cells"]) if tm >= t_from - 1e-9]

@@ -54,10 +54,11 @@ def _mean(x) -> float | None:
 def outcomes(analysis: dict) -> dict:
     """The outcomes of one run (module docstring) from its analysis summary (taichimyxo.analysis.analyze's dict or
     its JSON); None where there is nothing to average (no aggregate, no free cell)."""
+    from ..analysis.stats import late_start  # here: the analysis package is heavy to import for a worker
     ts = analysis["timeseries"]
     v_b = float(analysis["meta"]["v_b_um_per_min"])
     t = np.asarray(ts["time_min"], float)
-    q0 = len(t) - max(1, len(t) // 4)
+    q0 = late_start(len(t))
     t_from = float(t[q0])
     last = lambda k: ts[k][q0:]                                  # noqa: E731
     cells, radius, edge = [], [], []
