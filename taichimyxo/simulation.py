@@ -52,6 +52,7 @@ class Simulation:
         self.time_offset = 0.0      # simulated time of steps taken at another dt than the scene's, minus their share
         self.writers = []
         self.rollbacks = []         # (step, simulated s, split) of each rollback (run_loop.py), kept in checkpoints
+        self.sessions_before = {}   # the wall-time totals a loaded checkpoint stored (writers.checkpoint_totals)
         self._twins, self._twin_tree = None, None       # the rollback's copy of the state, made on first use
         self._closed = False
         backend.simulation_starting()
@@ -109,6 +110,7 @@ class Simulation:
         self.state.load(positions, engine_direction)
         self.step_count = step
         self.time_offset = 0.0
+        self.sessions_before = {}
         self.integrator.reset()
         self.snapshot_speed()
         self.neighbours.rebuild()
@@ -166,6 +168,8 @@ class Simulation:
         self.time_offset = float(st["time_offset"]) if "time_offset" in st else 0.0
         done = np.asarray(st["rollbacks"]) if "rollbacks" in st else np.zeros((0, 3))
         self.rollbacks = [(int(a), float(b), int(c)) for a, b, c in done]
+        from .writers import checkpoint_totals
+        self.sessions_before = checkpoint_totals(st)
         added_later = self.model.added_later()
         for name, f in self._checkpointed().items():
             if name in st or name not in added_later:

@@ -127,17 +127,19 @@ def scene_render_options(scene) -> dict:
 class Checkpoint(Writer):
     """The full state as npz (positions, speed window, clocks, slime; see Simulation.get_checkpoint) with the
     scene's fingerprint and the run's wall-time totals up to that state (session_totals; `before`: the earlier
-    sessions' totals, previous_sessions): on `trigger` (wall clock), on interruption and on a broken invariant.
-    Written atomically (a temporary file, then renamed). A session killed without a summary resumes from here with
-    its wall time up to the checkpoint counted."""
+    sessions' totals, previous_sessions; by default those of the checkpoint the simulation was loaded from): on
+    `trigger` (wall clock), on interruption and on a broken invariant. Written atomically (a temporary file, then
+    renamed). A session killed without a summary resumes from here with its wall time up to the checkpoint counted."""
 
     def __init__(self, path, trigger=None, *, remove_when_completed: bool = True, before: dict | None = None):
         self.path = Path(path)
         self.trigger = trigger if trigger is not None else WallClock(seconds=300)
         self.remove_when_completed = remove_when_completed
-        self.before = dict(before or {})
+        self.before = dict(before) if before is not None else None
 
     def start(self, run) -> None:
+        if self.before is None:
+            self.before = dict(run.sim.sessions_before)
         if hasattr(self.trigger, "restart"):
             self.trigger.restart()
 
@@ -278,13 +280,20 @@ def session_totals(before: dict, wall: float, by_hour: list) -> dict:
             "wall_seconds_by_hour": _add_lists(before.get("wall_seconds_by_hour", []), by_hour)}
 
 
+def checkpoint_totals(checkpoint: dict) -> dict:
+    """The wall-time totals a checkpoint stored (session_totals), or {} for one written before it stored them."""
+    if "wall_seconds_total" not in checkpoint:
+        return {}
+    return {"wall_seconds_total": float(checkpoint["wall_seconds_total"]),
+            "sessions": int(checkpoint["sessions"]),
+            "wall_seconds_by_hour": [float(w) for w in checkpoint["wall_seconds_by_hour"]]}
+
+
 def previous_sessions(path: Path, scene, checkpoint: dict | None = None) -> dict:
     """Totals of the earlier sessions of this run: those stored in the checkpoint it resumes from (its wall time up
     to that state, even when the session was killed), else those of the summary an interrupted session wrote."""
-    if checkpoint is not None and "wall_seconds_total" in checkpoint:
-        return {"wall_seconds_total": float(checkpoint["wall_seconds_total"]),
-                "sessions": int(checkpoint["sessions"]),
-                "wall_seconds_by_hour": [float(w) for w in checkpoint["wall_seconds_by_hour"]]}
+    if checkpoint is not None and checkpoint_totals(checkpoint):
+        return checkpoint_totals(checkpoint)
     try:
         d = json.loads(path.read_text())
     except (OSError, ValueError):
@@ -312,8 +321,9 @@ def _load_average() -> float | None:
 class Summary(Writer):
     """The JSON run summary, written when the run ends (any status). files: the outputs to list (name -> Path);
     checkpoint: the checkpoint's path, listed when the run did not complete; resumed: this session continued an
-    interrupted one (the totals add the earlier sessions': `before`, previous_sessions, else read from the summary
-    it wrote); setup_seconds, arch: how the simulation was built."""
+    interrupted one. The totals add the earlier sessions': `before` (previous_sessions), else those of the
+    checkpoint the simulation was loaded from, else, when resumed, those of the summary it wrote. setup_seconds,
+    arch: how the simulation was built."""
     order = 1
 
     def __init__(self, path, *, files: dict | None = None, checkpoint=None, resumed: bool = False,
@@ -323,8 +333,8 @@ class Summary(Writer):
         self.summary = None
 
     def finish(self, run) -> None:
-        before = (self.before if self.before is not None else previous_sessions(self.path, run.sim.scene)) \
-            if self.resumed else {}
+        before = self.before if self.before is not None else (
+            run.sim.sessions_before or (previous_sessions(self.path, run.sim.scene) if self.resumed else {}))
         self.summary = run_summary(run, self.files, self.checkpoint, before, self.setup_seconds, self.arch)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.path.write_text(json.dumps(self.summary, indent=1))

@@ -92,3 +92,26 @@ def test_summary_splits_the_wall_time_by_simulated_hour_over_sessions(make_sim, 
     total = rest.summary["wall_seconds_by_hour"]
     assert len(total) == 2 and all(w > 0 for w in total) and total[0] > by_hour[0]
     assert sum(total) <= first.summary["wall_seconds"] + rest.summary["wall_seconds"] + 1e-3
+
+
+def test_a_checkpoint_resumed_through_the_api_carries_its_sessions(make_sim, tmp_path):
+    """A script that resumes a run itself (Simulation.load_checkpoint, then a Checkpoint writer with no `before`)
+    still counts the earlier sessions: the totals come from the checkpoint the simulation was loaded from."""
+    import numpy as np
+
+    from taichimyxo.run_loop import drive
+    from taichimyxo.writers import Checkpoint, Summary, read_checkpoint
+    sc = build_small_scene(4, run={"hours": 0.001, "dt_ms": 1.0})
+    sim = make_sim(sc)
+    path = tmp_path / "run.ckpt.npz"
+    first = Summary(tmp_path / "first.json")
+    drive(sim, 2000, [Checkpoint(path), first], catch_signals=False, chunk_steps=400, stop_after_steps=600)
+    assert int(np.load(path)["sessions"]) == 1
+    sim.load_checkpoint(read_checkpoint(path, sc))
+    second = Summary(tmp_path / "second.json")
+    drive(sim, 2000, [Checkpoint(path), second], catch_signals=False, chunk_steps=400, stop_after_steps=600)
+    stored = np.load(path)
+    assert int(stored["sessions"]) == 2 and second.summary["sessions"] == 2
+    assert float(stored["wall_seconds_total"]) == pytest.approx(
+        first.summary["wall_seconds"] + second.summary["wall_seconds"])
+    assert second.summary["wall_seconds_total"] == pytest.approx(float(stored["wall_seconds_total"]))
