@@ -108,7 +108,7 @@ def test_every_shipped_sweep_file_loads_and_its_points_are_valid_scenes():
 
 def test_a_grid_of_scenes_runs_each_scene_with_its_own_values(tmp_path, capsys):
     """[grid] scene sweeps base scenes: Fig 2's runs are S1-S4 themselves at the figure's scale, S1, S3 and S4 at
-    their own 4 ms step, so each run is the scene (the same fingerprint) a video can be rendered from."""
+    their own 4 ms step and S2 at 3 ms, so each run is the scene (the same fingerprint) a video can be rendered from."""
     from taichimyxo.sweep import load_sweep
     f = tmp_path / "fig2.toml"
     f.write_text((REPO / "sweeps" / "figures" / "Fig2.toml").read_text().replace("seeds = 1", "seeds = 1\nscale = 0.5"))
@@ -117,7 +117,7 @@ def test_a_grid_of_scenes_runs_each_scene_with_its_own_values(tmp_path, capsys):
     for i, p in enumerate(pts, 1):
         ref = Scene.load(f"S{i}", {"domain": {"width_um": 100.0, "height_um": 100.0}})
         assert p.scene.fingerprint() == ref.fingerprint(), p.name
-    assert [p.scene.dt for p in pts] == [0.004, 0.002, 0.004, 0.004]
+    assert [p.scene.dt for p in pts] == [0.004, 0.003, 0.004, 0.004]
     bad = tmp_path / "bad.toml"
     bad.write_text('hours = 0.001\n[grid]\nscene = ["S1", "S99"]\n')
     line = error_line(capsys, main(["sweep", str(bad), "--out", str(tmp_path / "o")]))
