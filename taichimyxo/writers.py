@@ -292,8 +292,9 @@ def checkpoint_totals(checkpoint: dict) -> dict:
 def previous_sessions(path: Path, scene, checkpoint: dict | None = None) -> dict:
     """Totals of the earlier sessions of this run: those stored in the checkpoint it resumes from (its wall time up
     to that state, even when the session was killed), else those of the summary an interrupted session wrote."""
-    if checkpoint is not None and checkpoint_totals(checkpoint):
-        return checkpoint_totals(checkpoint)
+    stored = checkpoint_totals(checkpoint) if checkpoint is not None else {}
+    if stored:
+        return stored
     try:
         d = json.loads(path.read_text())
     except (OSError, ValueError):
