@@ -67,7 +67,9 @@ class _Direct:
         runtime = impl.get_runtime()
         prog = runtime.prog
         compiled = prog.compile_kernel(prog.config(), prog.get_device_caps(), t_kernel)
-        make, launch, sync = t_kernel.make_launch_context, prog.launch_kernel, runtime.sync
+        # prog.synchronize, not runtime.sync, which checks every field builder again on each call: the first call
+        # materialized them
+        make, launch, sync = t_kernel.make_launch_context, prog.launch_kernel, prog.synchronize
         setters, get = self._setters, self._get
 
         def call(*a):
