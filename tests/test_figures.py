@@ -162,6 +162,15 @@ def test_a_run_two_figures_share_is_run_once(tmp_path, capsys):
     assert text.count("shared") == 1
 
 
+def test_a_rerun_starts_the_interrupted_runs_before_new_ones():
+    """After an interruption the runs already under way resume first, the longest of them first, then the new
+    runs, longest first: what an earlier session started is finished and recorded before new work begins."""
+    from taichimyxo.figures.command import queue_order
+    sizes = {"D1": 8, "D2": 8, "B2": 4, "C1": 4, "C2": 5, "A2": 4}
+    states = {"D1": "new", "D2": "new", "B2": "interrupted", "C1": "interrupted", "C2": "interrupted", "A2": "new"}
+    assert queue_order(list(sizes), states, sizes) == ["C2", "B2", "C1", "D1", "D2", "A2"]
+
+
 def test_strain_panel_without_logged_strain_computes_it_and_says_so(tmp_path):
     """A run that did not log strain still gives its strain panel: the energy is a function of the positions."""
     from taichimyxo.figures.compose import compose_figure

@@ -200,7 +200,7 @@ def run_all(plans: list, executor: str, jobs: int | None, options: dict, chosen:
             dirs.append(d)
             sizes[d] = pt.scene.steps * pt.scene.n_cells
     states = {d: _state(d) for d in dirs}
-    todo = sorted((d for d in dirs if states[d] not in ("done", "running")), key=lambda d: -sizes[d])  # longest 1st
+    todo = queue_order([d for d in dirs if states[d] not in ("done", "running")], states, sizes)
     going = [d for d in dirs if states[d] == "running"]
     for d in going:
         print(f"taichimyxo: {Path(d).name} is running in another process; left to it", file=sys.stderr)
@@ -222,6 +222,12 @@ def run_all(plans: list, executor: str, jobs: int | None, options: dict, chosen:
         print("taichimyxo: figures interrupted; run the same command again to continue", file=sys.stderr)
         return EXIT_INTERRUPTED
     return EXIT_RUN_FAILED if bad else 0
+
+
+def queue_order(dirs: list, states: dict, sizes: dict) -> list:
+    """The order runs start in: interrupted runs first, so that a rerun finishes (and records) what an earlier
+    session started before it begins new runs; within each group the longest first, so the last to start are short."""
+    return sorted(dirs, key=lambda d: (states[d] != "interrupted", -sizes[d]))
 
 
 def _state(d: str) -> str:
