@@ -260,6 +260,23 @@ def test_videos_in_parallel_go_through_the_executor_and_s8_waits_for_s3s_traject
     assert Scene.load(str(tmp_path / ".jobs" / "S8-preview" / "scene.toml")).color == "strain"
 
 
+@pytest.mark.skipif(not Path("/proc/self/autogroup").exists(), reason="no session scheduling groups (autogroup)")
+def test_a_niced_sweep_starts_its_runs_at_its_own_niceness():
+    """Runs start in sessions of their own; where Linux schedules each session as a group (autogroup) that group
+    is at nice 0, and `nice -n 19 python -m taichimyxo sweep ...` would not lower the runs' priority. The executor
+    gives each run's group the sweep's niceness."""
+    import subprocess
+    import sys
+    code = ("import os, subprocess; from pathlib import Path; from taichimyxo.sweep.local import keep_priority\n"
+            "os.nice(7)\n"
+            "p = subprocess.Popen(['sleep', '30'], start_new_session=True)\n"
+            "keep_priority(p.pid)\n"
+            "print(Path(f'/proc/{p.pid}/autogroup').read_text().split()[-1]); p.kill()\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["7"]
+
+
 def test_local_executor_keeps_jobs_runs_going(tmp_path, monkeypatch):
     """--jobs N: N worker processes run at once (never more), the next starts as soon as one ends. Workers are
     stand-ins that end after a fixed number of polls, so this is about the executor's order, not about clocks (the

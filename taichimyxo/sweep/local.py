@@ -96,6 +96,7 @@ def execute(run_dirs: list[str], jobs: int, options: dict, progress) -> dict[str
                 launched[d] = time.time()
                 proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                                         env=env, start_new_session=True)
+                keep_priority(proc.pid)
                 running[d] = (proc, log)
                 progress.started(d)
             reap(block=False)
@@ -115,6 +116,20 @@ def execute(run_dirs: list[str], jobs: int, options: dict, progress) -> dict[str
         if old_term is not None:
             signal.signal(signal.SIGTERM, old_term)
     return results
+
+
+def keep_priority(pid: int) -> None:
+    """Give a run started in its own session this process's niceness: where Linux groups the scheduling of each
+    session (autogroup), a new session is scheduled at nice 0 whatever the process's own nice, so a sweep started
+    with `nice -n 19` would run its runs at the priority of every other session."""
+    nice = os.nice(0)
+    group = Path(f"/proc/{pid}/autogroup")
+    if nice <= 0 or not group.exists():
+        return
+    try:
+        group.write_text(str(nice))
+    except OSError:                         # not permitted here: the runs keep their session's priority
+        pass
 
 
 def _raise_interrupt(signum, frame):
