@@ -13,6 +13,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -68,6 +69,30 @@ def test_dry_run_counts_runs_hours_and_wall_time(tmp_path, capsys):
     text = capsys.readouterr().out
     assert text.count("not chosen") == 9 and "total: 3 of 12 runs chosen, 72 simulated hours" in text
     assert not out.exists()
+
+
+def test_dry_run_prices_what_is_left_of_an_interrupted_run(tmp_path, capsys):
+    """An interrupted run is priced by the steps its checkpoint has still to go, and says how far it got."""
+    import numpy as np
+    out = tmp_path / "figs"
+    runs = plan_figure(FIGURES["S6Fig"], "half", out)
+    pt = runs.points[1]
+    runs.run_dir(pt).mkdir(parents=True)
+    np.savez(runs.run_dir(pt) / f"{pt.scene.name}.ckpt.npz", fingerprint=np.array(pt.scene.fingerprint()),
+             step=np.array(pt.scene.steps // 4))
+    assert runs.run_state(pt) == "interrupted" and runs.fraction_done(pt) == 0.25
+    assert main(["figures", "S6Fig", "--scale", "half", "--out", str(out), "--dry-run"]) == 0
+    lines = {ln.split()[1]: ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("  ")}
+    new, part = lines[runs.points[0].name], lines[pt.name]
+    assert "left (25% done)" in part and "left" not in new
+
+    def minutes(line):                               # '~1 h 31 min', '~48 min 10 s'
+        t = line.split("~")[1]
+        h = re.search(r"(\d+) h", t)
+        return (int(h.group(1)) * 60 if h else 0) + int(re.search(r"(\d+) min", t).group(1))
+    assert abs(minutes(part) - 0.75 * minutes(new)) <= 1      # three quarters of the same run
+    np.savez(runs.run_dir(pt) / f"{pt.scene.name}.ckpt.npz", fingerprint=np.array("other"), step=np.array(9))
+    assert runs.fraction_done(pt) == 0.0             # a checkpoint of other parameters is not this run's progress
 
 
 def test_every_figure_has_a_sweep_file_whose_points_match_its_panels(tmp_path):

@@ -134,25 +134,29 @@ def print_dry_run(plans: list, jobs: int, records: Path | None = None, chosen: s
     rates, measured = bench_rates(), measured_rates(records)
     total, all_secs, owners = 0.0, [], run_owners(plans, chosen)
     for p in plans:
+        states = p.states()
         secs = [run_seconds(pt.scene, rates, measured) for pt in p.points]
+        done = [p.fraction_done(pt) if st in ("interrupted", "running") else 0.0 for pt, st in zip(p.points, states)]
+        secs = [s * (1.0 - f) if s else s for s, f in zip(secs, done)]       # what is left of an interrupted run
         hours = sum(pt.scene.hours for pt in p.points)
         total += hours
         cells = sorted({pt.scene.n_cells for pt in p.points})
         w, h = p.points[0].scene.box
-        todo = [s for pt, s, st in zip(p.points, secs, p.states())
+        todo = [s for pt, s, st in zip(p.points, secs, states)
                 if st not in FINISHED and (chosen is None or pt.name in chosen)]
         est = f", about {duration(sum(s for s in todo if s))} of run time left" if None not in secs else ""
         print(f"{p.figure.name} ({p.scale_name}, {w:g} x {h:g} µm, {'/'.join(map(str, cells))} cells): "
               f"{len(p.points)} runs x {len(p.sweep.seeds)} seed{'s' if len(p.sweep.seeds) > 1 else ''}, "
               f"{hours:g} simulated hours{est}; {p.figure.scenes}; in {p.root}")
-        for pt, st, s in zip(p.points, p.states(), secs):
+        for pt, st, s, f in zip(p.points, states, secs, done):
             if chosen is not None and pt.name not in chosen:
                 st = "not chosen" if st not in FINISHED else st
             owner = owners.get(run_identity(pt), (p.figure.name, pt.name))
             if st not in FINISHED and st != "not chosen" and owner != (p.figure.name, pt.name):
                 st, s = "shared", None
             note = f"the same run as {' '.join(owner)}" if st == "shared" else ""
-            print(f"  {st:<11} {pt.name:<34} {pt.scene.hours:g} h  {'~' + duration(s) if s else note}")
+            left = f" left ({f:.0%} done)" if f else ""
+            print(f"  {st:<11} {pt.name:<34} {pt.scene.hours:g} h  {'~' + duration(s) + left if s else note}")
             if st not in FINISHED and st != "not chosen" and s:
                 all_secs.append(s)
     runs = sum(len(p.points) for p in plans)

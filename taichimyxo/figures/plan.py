@@ -49,6 +49,18 @@ class FigureRuns:
     def run_state(self, point) -> str:
         return state(self.run_dir(point))
 
+    def fraction_done(self, point) -> float:
+        """The share of the run's steps its checkpoint holds (0 without one, or one of other parameters)."""
+        import numpy as np
+        path = self.run_dir(point) / f"{point.scene.name}.ckpt.npz"
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                if str(z["fingerprint"]) != point.scene.fingerprint():
+                    return 0.0
+                return min(1.0, int(z["step"]) / max(1, point.scene.steps))
+        except (OSError, KeyError, ValueError):
+            return 0.0
+
     def record_file(self, point) -> Path | None:
         """The run's record file (taichimyxo.figures.records) where there is one: its own, else another figure's
         record of the same run (records.shared_record)."""
