@@ -189,11 +189,13 @@ def test_a_run_two_figures_share_is_run_once(tmp_path, capsys):
 
 def test_a_rerun_starts_the_interrupted_runs_before_new_ones():
     """After an interruption the runs already under way resume first, the longest of them first, then the new
-    runs, longest first: what an earlier session started is finished and recorded before new work begins."""
-    from taichimyxo.figures.command import queue_order
+    runs, longest first: what an earlier session started is finished and recorded before new work begins. A sweep
+    (no sizes) keeps its file's order within each group."""
+    from taichimyxo.sweep.rundir import queue_order
     sizes = {"D1": 8, "D2": 8, "B2": 4, "C1": 4, "C2": 5, "A2": 4}
     states = {"D1": "new", "D2": "new", "B2": "interrupted", "C1": "interrupted", "C2": "interrupted", "A2": "new"}
     assert queue_order(list(sizes), states, sizes) == ["C2", "B2", "C1", "D1", "D2", "A2"]
+    assert queue_order(list(sizes), states) == ["B2", "C1", "C2", "D1", "D2", "A2"]
 
 
 def test_strain_panel_without_logged_strain_computes_it_and_says_so(tmp_path):

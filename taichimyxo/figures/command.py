@@ -137,7 +137,7 @@ def print_dry_run(plans: list, jobs: int, records: Path | None = None, chosen: s
         states = p.states()
         secs = [run_seconds(pt.scene, rates, measured) for pt in p.points]
         done = [p.fraction_done(pt) if st in ("interrupted", "running") else 0.0 for pt, st in zip(p.points, states)]
-        secs = [s * (1.0 - f) if s else s for s, f in zip(secs, done)]       # what is left of an interrupted run
+        secs = [s * (1.0 - f) if s else s for s, f in zip(secs, done)]       # what is left of a run under way
         hours = sum(pt.scene.hours for pt in p.points)
         total += hours
         cells = sorted({pt.scene.n_cells for pt in p.points})
@@ -204,7 +204,8 @@ def run_all(plans: list, executor: str, jobs: int | None, options: dict, chosen:
             dirs.append(d)
             sizes[d] = pt.scene.steps * pt.scene.n_cells
     states = {d: _state(d) for d in dirs}
-    todo = queue_order([d for d in dirs if states[d] not in ("done", "running")], states, sizes)
+    from ..sweep.rundir import queue_order
+    todo = queue_order([d for d in dirs if states[d] not in ("done", "running")], states, sizes)  # longest 1st
     going = [d for d in dirs if states[d] == "running"]
     for d in going:
         print(f"taichimyxo: {Path(d).name} is running in another process; left to it", file=sys.stderr)
@@ -226,12 +227,6 @@ def run_all(plans: list, executor: str, jobs: int | None, options: dict, chosen:
         print("taichimyxo: figures interrupted; run the same command again to continue", file=sys.stderr)
         return EXIT_INTERRUPTED
     return EXIT_RUN_FAILED if bad else 0
-
-
-def queue_order(dirs: list, states: dict, sizes: dict) -> list:
-    """The order runs start in: interrupted runs first, so that a rerun finishes (and records) what an earlier
-    session started before it begins new runs; within each group the longest first, so the last to start are short."""
-    return sorted(dirs, key=lambda d: (states[d] != "interrupted", -sizes[d]))
 
 
 def _state(d: str) -> str:

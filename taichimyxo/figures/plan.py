@@ -52,7 +52,9 @@ class FigureRuns:
     def fraction_done(self, point) -> float:
         """The share of the run's steps its checkpoint holds (0 without one, or one of other parameters)."""
         import numpy as np
-        path = self.run_dir(point) / f"{point.scene.name}.ckpt.npz"
+
+        from ..outdir import outputs
+        path = outputs(self.run_dir(point), point.scene.name)["ckpt"]
         try:
             with np.load(path, allow_pickle=False) as z:
                 if str(z["fingerprint"]) != point.scene.fingerprint():

@@ -21,7 +21,7 @@ from pathlib import Path
 
 from .collect import collect
 from .progress import SweepProgress
-from .rundir import RUNNING_ELSEWHERE, prepare, state, write_text_atomic
+from .rundir import RUNNING_ELSEWHERE, prepare, queue_order, state, write_text_atomic
 from .spec import SweepError, choose_runs, load_sweep
 
 EXECUTORS = {"local": "taichimyxo.sweep.local", "slurm": "taichimyxo.sweep.slurm"}
@@ -83,7 +83,8 @@ def run_sweep(path, executor: str = "local", jobs: int | None = None, out=None, 
     check_output_dir(str(root))
     write_text_atomic(root / "sweep.toml", Path(sweep.path).read_text())     # what was asked, beside the results
     dirs = [str(prepare(p, root, sweep)) for p in points]
-    todo = [d for d, (_, _, st) in zip(dirs, listing) if st not in ("done", "not chosen", "running")]
+    states = {d: st for d, (_, _, st) in zip(dirs, listing)}
+    todo = queue_order([d for d in dirs if states[d] not in ("done", "not chosen", "running")], states)
     counts["skipped"] = sum(st == "done" for _, _, st in listing)
     counts[RUNNING_ELSEWHERE] = sum(st == "running" for _, _, st in listing)   # another command's: left to it
     progress = SweepProgress(sweep.name, total=counts["skipped"] + len(todo), skipped=counts["skipped"], jobs=jobs,

@@ -91,6 +91,12 @@ def state(run_dir) -> str:
     return "new"
 
 
+def queue_order(dirs: list, states: dict, sizes: dict | None = None) -> list:
+    """The order runs start in: interrupted runs first, so that a rerun finishes (and records) what an earlier
+    session started before it begins new runs; within each group the largest `sizes` first (none: as given)."""
+    return sorted(dirs, key=lambda d: (states[d] != "interrupted", -(sizes or {}).get(d, 0)))
+
+
 def prepare_job(scene, run_dir, meta: dict, fresh: bool = False) -> Path:
     """A run folder for `scene`: scene.toml (the resolved scene) and point.json (`meta`: name; optionally out, the
     folder the run writes its files into, relative to run_dir (default: run_dir itself); arch; reuse, render from a
