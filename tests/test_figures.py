@@ -12,6 +12,7 @@
 - The stiffness statements: consistent, not consistent and 'not measurable here' on synthetic records."""
 from __future__ import annotations
 
+import csv
 import json
 import re
 from pathlib import Path
@@ -185,6 +186,38 @@ def test_a_run_two_figures_share_is_run_once(tmp_path, capsys):
     text = capsys.readouterr().out
     assert "shared      scene=S2FigB_seed=1                6 h  the same run as Fig2 scene=S1_seed=1" in text
     assert text.count("shared") == 1
+
+
+def test_a_stiffness_figure_with_runs_missing_measures_its_series_on_those_finished(tmp_path, capsys):
+    """S3 Fig with its very rigid run still to come: not composed, but its stiffness series and the statements are
+    written on the three finished runs, the very rigid statement 'not measurable here'."""
+    out = tmp_path / "figs"
+    runs = plan_figure(FIGURES["S3Fig"], "half", out, seeds=1)
+    formed = {1e-18: (50.0, 6.0), 1e-17: (35.0, 10.0), 1e-16: (8.0, 56.0)}      # aggregates per frame, cells each
+    t = [float(m) for m in range(0, 361, 30)]
+    _fake_finished_runs(runs, gas=30, seed=1)
+    for pt in runs.points[:3]:
+        n_agg, cells = formed[float(pt.scene.raw["cell"]["k_a_N_m"])]
+        runs.trajectory(pt).with_suffix(".analysis.json").write_text(json.dumps(dict(
+            timeseries=dict(time_min=t, n_aggregates=[n_agg] * len(t), fraction_in_aggregates=[0.8] * len(t),
+                            mean_cluster_size_weighted=[cells] * len(t)),
+            tracks=[dict(series=dict(time_min=t, n_cells=[cells] * len(t)))],
+            lifetimes=dict(fraction_aggregate_frames_long_lived=0.9))))
+    missing = runs.points[3]
+    assert float(missing.scene.raw["cell"]["k_a_N_m"]) == 1e-15
+    import shutil
+    shutil.rmtree(runs.run_dir(missing))
+    rc = main(["figures", "S3Fig", "--scale", "half", "--seeds", "1", "--out", str(out), "--runs", runs.points[0].name])
+    err = capsys.readouterr().err
+    assert rc == 0
+    assert "S3Fig not composed: 3 of 4 runs finished; its stiffness series measured on those" in err
+    assert not (out / "S3Fig.half.png").exists()
+    table = (out / "stiffness.half.csv").read_text()
+    assert table.count("active,") == 3 * 5 and "1e-15" not in table
+    rows = {r["id"]: r for r in csv.DictReader(open(out / "stiffness.half.claims.csv"))}
+    assert rows["stiffness_aggregates_larger_fewer"]["status"] == "consistent"
+    assert rows["stiffness_very_flexible_many_small_stable"]["status"] == "consistent"
+    assert rows["stiffness_very_rigid_none"]["status"].startswith("not measurable here: needs active runs at k_a")
 
 
 def test_a_rerun_starts_the_interrupted_runs_before_new_ones():

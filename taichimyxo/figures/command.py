@@ -4,7 +4,8 @@
 Every figure's runs are checked first (an unknown figure, a scale that leaves too few cells, missing runs under
 --no-run: one line, exit 2, nothing written); then the runs of every figure asked for go to one executor together
 (so the cores stay busy across figures), finished runs skipped and interrupted ones resumed; then each figure whose
-runs completed is composed (taichimyxo.figures.compose) and, for S2 Fig and S3 Fig, its stiffness series measured."""
+runs completed is composed (taichimyxo.figures.compose) and, for S2 Fig and S3 Fig, its stiffness series measured
+(on the finished runs so far where some are missing)."""
 from __future__ import annotations
 
 import os
@@ -99,8 +100,16 @@ def cmd_figures(args, options: dict) -> int:
         for path in save_records(p, records):
             print(f"kept {path}")
     for p in plans:
-        if any(st not in FINISHED for st in p.states()):    # a failed run: the other figures are still made
-            print(f"taichimyxo: {p.figure.name} not composed: not all of its runs finished", file=sys.stderr)
+        states = p.states()
+        if any(st not in FINISHED for st in states):        # a failed run: the other figures are still made
+            done = sum(st in FINISHED for st in states)
+            why = f"{p.figure.name} not composed: {done} of {len(states)} runs finished"
+            if p.figure.stiffness and done:                 # the series so far: its rows say what is missing
+                from .stiffness import write_stiffness
+                for path in write_stiffness(p, Path(args.out)):
+                    print(f"wrote {path}")
+                why += "; its stiffness series measured on those"
+            print(f"taichimyxo: {why}", file=sys.stderr)
             continue
         for path in compose_figure(p, Path(args.out)):
             print(f"wrote {path}")

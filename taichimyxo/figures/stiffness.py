@@ -55,7 +55,7 @@ def write_stiffness(runs, out: Path) -> list[Path]:
             w.writerow([r["kind"], f"{r['k_a_N_m']:g}", r["stiffness"], r["measure"],
                         "" if r["mean"] is None else f"{r['mean']:.6g}", "" if r["sd"] is None else f"{r['sd']:.6g}",
                         r["n_seeds"], f"{r['hours']:.4g}", " ".join(f"{v:.6g}" for v in r["values"])])
-    _plot(table, files["png"])
+    _plot(table, files["png"], len(recs))
     rows = stiffness_rows(recs)
     cols = ("claim", "measured", "paper", "status")
     esc = lambda s: str(s).replace("|", "\\|")        # noqa: E731
@@ -71,7 +71,7 @@ def write_stiffness(runs, out: Path) -> list[Path]:
     return list(files.values())
 
 
-def _plot(table: list[dict], path: Path) -> None:
+def _plot(table: list[dict], path: Path, n_runs: int) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -88,12 +88,17 @@ def _plot(table: list[dict], path: Path) -> None:
             for r in rows:
                 ax.plot([r["k_a_N_m"]] * len(r["values"]), r["values"], ".", color="grey", alpha=0.6)
         ax.set_xscale("log")
+        ax.set_xlim(min(STIFFNESS) / 2, max(STIFFNESS) * 2)     # the four stiffnesses, with or without their runs
+        if not ax.get_lines():
+            ax.text(0.5, 0.5, "no runs", transform=ax.transAxes, ha="center", va="center", color="grey")
+            ax.set_yticks([])
         ax.set_xticks(list(STIFFNESS), [f"{k:g}\n{v}" for k, v in STIFFNESS.items()], fontsize=7)
         ax.set(xlabel="k_a (N·m)", title=MEASURES[m])
         ax.title.set_fontsize(9)
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=7)
-    fig.suptitle("Stiffness series: mean ± SD over seeds (dots: seeds), last quarter of each run", fontsize=10)
+    fig.suptitle(f"Stiffness series over {n_runs} runs: mean ± SD over seeds (dots: seeds), last quarter of each run",
+                 fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
