@@ -252,7 +252,10 @@ def test_composite_from_tiny_runs_with_stiffness_series(tmp_path):
                        extra_set={"output.frame_interval_min": 0.01}, min_cells=1)
     assert [p.scene.n_cells for p in runs.points] == [20] * 4
     first = runs.points[0].name                                          # --runs: part of a figure now
+    runs.records = tmp_path / "kept-as-each-ends"       # a run's record as it completes, not after the figure's last
     assert run_all([runs], "local", 2, {}, chosen={first}) == 0
+    assert [f.stem for f in runs.records.glob("*/*.npz")] == [runs.points[0].dir_name]
+    runs.records = None
     assert runs.states()[0] == "done" and not any(st in ("done", "recorded") for st in runs.states()[1:])
     assert run_all([runs], "local", 2, {}) == 0
     assert all(st == "done" for st in runs.states())

@@ -199,7 +199,7 @@ def run_all(plans: list, executor: str, jobs: int | None, options: dict, chosen:
     jobs = jobs or getattr(ex, "DEFAULT_JOBS", None) or os.cpu_count() or 1
     for p in plans:
         check_output_dir(str(p.root))
-    dirs, sizes, recorded = [], {}, set()
+    dirs, sizes, recorded, point_of = [], {}, set(), {}
     owners = run_owners(plans, chosen)
     for p in plans:
         p.sweep = load_sweep(write_sweep_file(p))       # the run folders name the sweep file beside them
@@ -211,6 +211,7 @@ def run_all(plans: list, executor: str, jobs: int | None, options: dict, chosen:
                 continue
             d = str(prepare(pt, p.root, p.sweep))
             dirs.append(d)
+            point_of[d] = (p, pt)
             sizes[d] = pt.scene.steps * pt.scene.n_cells
     states = {d: _state(d) for d in dirs}
     from ..sweep.rundir import queue_order
@@ -220,7 +221,8 @@ def run_all(plans: list, executor: str, jobs: int | None, options: dict, chosen:
         print(f"taichimyxo: {Path(d).name} is running in another process; left to it", file=sys.stderr)
     names = "+".join(p.figure.name for p in plans)
     total = len(dirs) + len(recorded) - len(going)
-    progress = SweepProgress(names, total=total, skipped=total - len(todo), jobs=jobs)
+    progress = SweepProgress(names, total=total, skipped=total - len(todo), jobs=jobs,
+                             on_completed=lambda d: _keep(*point_of[d]))
     progress.tick()
     try:
         results = ex.execute(todo, jobs, opts, progress) if todo else {}
@@ -236,6 +238,16 @@ def run_all(plans: list, executor: str, jobs: int | None, options: dict, chosen:
         print("taichimyxo: figures interrupted; run the same command again to continue", file=sys.stderr)
         return EXIT_INTERRUPTED
     return EXIT_RUN_FAILED if bad else 0
+
+
+def _keep(runs, point) -> None:
+    """A run's record as soon as it completes: a session that ends, or a machine that is wiped, before the figure's
+    other runs do keeps it."""
+    from .records import save_record
+    if runs.records is not None:
+        path = save_record(runs, point, runs.records)
+        if path is not None:
+            print(f"kept {path}", flush=True)
 
 
 def _state(d: str) -> str:

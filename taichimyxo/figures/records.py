@@ -145,17 +145,18 @@ def shared_record(records: Path, point, first: bool) -> Path | None:
 
 
 def save_records(runs, records: Path) -> list[Path]:
-    """A record of every finished run of the figure that has none (or an older one than its trajectory). The first
-    seed's runs keep their start too: another figure sharing the run may show it."""
-    written = []
-    for pt in runs.points:
-        traj = runs.trajectory(pt)
-        if runs.run_state(pt) != "done" or not traj.is_file():
-            continue
-        path = record_path(records, runs, pt)
-        if path.is_file() and path.stat().st_mtime >= traj.stat().st_mtime:
-            continue
-        first = pt.seed == runs.sweep.seeds[0]
-        written.append(write_record(path, traj, traj.with_suffix(".analysis.json"), traj.with_suffix(".json"),
-                                    first))
-    return written
+    """A record of every finished run of the figure that has none (or an older one than its trajectory)."""
+    return [path for pt in runs.points if (path := save_record(runs, pt, records)) is not None]
+
+
+def save_record(runs, point, records: Path) -> Path | None:
+    """The record of one finished run, where it has none or an older one than its trajectory (None: nothing to
+    write). The first seed's runs keep their start too: another figure sharing the run may show it."""
+    traj = runs.trajectory(point)
+    if runs.run_state(point) != "done" or not traj.is_file():
+        return None
+    path = record_path(records, runs, point)
+    if path.is_file() and path.stat().st_mtime >= traj.stat().st_mtime:
+        return None
+    first = point.seed == runs.sweep.seeds[0]
+    return write_record(path, traj, traj.with_suffix(".analysis.json"), traj.with_suffix(".json"), first)

@@ -13,7 +13,10 @@ from ..status_line import StatusLine, duration
 
 
 class SweepProgress:
-    def __init__(self, name: str, total: int, skipped: int, jobs: int, stream=None, interval_s: float | None = None):
+    def __init__(self, name: str, total: int, skipped: int, jobs: int, stream=None, interval_s: float | None = None,
+                 on_completed=None):
+        """on_completed(run_dir): called as each run completes, before the others end (a figure keeps its record)."""
+        self.on_completed = on_completed
         self.status = StatusLine(stream, interval_s, file_interval_s=60.0)
         self.stream = self.status.stream
         self.name, self.total, self.skipped, self.jobs = name, total, skipped, max(1, jobs)
@@ -37,6 +40,11 @@ class SweepProgress:
             if took is not None:
                 self.durations.append(took)
             self.note(f"done {name}" + (f" in {duration(took)}" if took is not None else ""))
+            if self.on_completed is not None:
+                try:
+                    self.on_completed(str(run_dir))
+                except Exception as e:          # noqa: BLE001 -- the other runs go on; the caller retries at the end
+                    self.note(f"{name}: {type(e).__name__}: {e}")
         elif status == "failed":
             self.note(f"failed {name}: {result.get('error') or 'no error message'}")
         else:
