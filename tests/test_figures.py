@@ -96,6 +96,34 @@ def test_dry_run_prices_what_is_left_of_an_interrupted_run(tmp_path, capsys):
     assert runs.fraction_done(pt) == 0.0             # a checkpoint of other parameters is not this run's progress
 
 
+def test_dry_run_prices_a_run_on_more_threads_by_the_measured_speed_up(tmp_path, capsys):
+    """--threads N divides each run's one-thread estimate by the benchmark's measured speed-up at the largest
+    measured count <= N (the median over its states), and says so; a count never measured is priced as one thread."""
+    from taichimyxo.figures.plan import thread_speedup
+    table = tmp_path / "threads.csv"
+    table.write_text("state,threads,ms_per_step,speedup_vs_first,rounds,particles\n"
+                     "a,1,1.0,1.0,2,10\na,2,0.5,2.0,2,10\nb,2,0.6,1.6,2,10\nc,2,0.55,1.8,2,10\n"
+                     "a,4,0.3,3.5,2,10\n")
+    assert thread_speedup(1, table) == (1.0, 1)
+    assert thread_speedup(2, table) == (1.8, 2) and thread_speedup(3, table) == (1.8, 2)
+    assert thread_speedup(8, table) == (3.5, 4)
+    assert thread_speedup(2, tmp_path / "absent.csv") == (1.0, 1)
+    out = tmp_path / "figs"
+
+    def run_minutes(threads):
+        assert main(["figures", "S6Fig", "--scale", "half", "--out", str(out), "--dry-run", "--jobs", "1",
+                     "--threads", str(threads)]) == 0
+        text = capsys.readouterr().out
+        t = re.search(r"with 1 at a time \((.*)\): ((?:\d+ h )?\d+ min)", text)
+        h = re.search(r"(\d+) h", t.group(2))
+        return t.group(1), (int(h.group(1)) * 60 if h else 0) + int(re.search(r"(\d+) min", t.group(2)).group(1))
+    (each1, one), (each2, two) = run_minutes(1), run_minutes(2)
+    speedup, n = thread_speedup(2)
+    assert each1 == "one thread each" and each2.startswith("2 threads each")
+    assert n == 2 and speedup > 1 and abs(two - one / speedup) <= 1
+    assert not out.exists()
+
+
 def test_every_figure_has_a_sweep_file_whose_points_match_its_panels(tmp_path):
     for fig in FIGURES.values():
         runs = plan_figure(fig, "half", tmp_path)

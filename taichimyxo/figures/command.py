@@ -79,7 +79,7 @@ def cmd_figures(args, options: dict) -> int:
         p.records = records
     jobs = args.jobs or os.cpu_count() or 1
     if args.dry_run:
-        print_dry_run(plans, jobs, records, chosen)
+        print_dry_run(plans, jobs, records, chosen, args.threads or 1)
         return 0
     if args.no_run:
         for p in plans:
@@ -137,14 +137,17 @@ def run_owners(plans: list, chosen: set | None = None) -> dict:
     return {k: v[:2] for k, v in owners.items()}
 
 
-def print_dry_run(plans: list, jobs: int, records: Path | None = None, chosen: set | None = None) -> None:
+def print_dry_run(plans: list, jobs: int, records: Path | None = None, chosen: set | None = None,
+                  threads: int = 1) -> None:
     from ..status_line import duration
-    from .plan import bench_rates, makespan, measured_rates, run_seconds
+    from .plan import bench_rates, makespan, measured_rates, run_seconds, thread_speedup
     rates, measured = bench_rates(), measured_rates(records)
+    speedup, measured_threads = thread_speedup(threads)
     total, all_secs, owners = 0.0, [], run_owners(plans, chosen)
     for p in plans:
         states = p.states()
         secs = [run_seconds(pt.scene, rates, measured) for pt in p.points]
+        secs = [s / speedup if s else s for s in secs]                        # one-thread costs, on `threads`
         done = [p.fraction_done(pt) if st in ("interrupted", "running") else 0.0 for pt, st in zip(p.points, states)]
         secs = [s * (1.0 - f) if s else s for s, f in zip(secs, done)]       # what is left of a run under way
         hours = sum(pt.scene.hours for pt in p.points)
@@ -178,8 +181,12 @@ def print_dry_run(plans: list, jobs: int, records: Path | None = None, chosen: s
              "of a formed state")
     source = (f"the particle-steps/s of the {done} finished run{'s' if done != 1 else ''} kept in {records}, for "
               f"the same kind of scene, else {bench}") if done else bench
+    each = "one thread each" if threads == 1 else (
+        f"{threads} threads each: one thread's time / {speedup:.2f}, the speed-up measured at {measured_threads} "
+        f"threads (benchmarks/results/threads.csv)" if measured_threads > 1 else
+        f"{threads} threads each, priced as one: no speed-up measured at {threads} threads")
     print(f"total: {runs}, {total:g} simulated hours; estimated wall time on this machine with {jobs} at a time "
-          f"(one thread each): {duration(makespan(all_secs, jobs))} ({source}; taichimyxo/figures/plan.py)")
+          f"({each}): {duration(makespan(all_secs, jobs))} ({source}; taichimyxo/figures/plan.py)")
 
 
 def run_all(plans: list, executor: str, jobs: int | None, options: dict, chosen: set | None = None) -> int:

@@ -9,6 +9,7 @@ import csv
 import json
 import math
 import re
+import statistics
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,6 +23,7 @@ THROUGHPUT_CSV = Path(__file__).resolve().parents[2] / "benchmarks" / "results" 
 # a step once aggregates have formed costs this many times the benchmark's step at the start (paper-scale S3 at its
 # state after 1 simulated hour against its start; docs/performance.md)
 FORMED_STATE_FACTOR = 3.3
+THREADS_CSV = THROUGHPUT_CSV.with_name("threads.csv")
 TOP_KEYS = ("seeds", "scale", "box_um", "hours")
 FINISHED = ("done", "recorded", "shared")   # completed here, or elsewhere (its record), or another figure's run
 
@@ -253,6 +255,24 @@ def run_seconds(scene, rates: dict, measured: dict | None = None) -> float | Non
     if not rows:
         return None
     return scene.steps * particles / nearest(rows) * FORMED_STATE_FACTOR
+
+
+def thread_speedup(threads: int, path: Path = THREADS_CSV) -> tuple[float, int]:
+    """How many times faster one run goes on `threads` CPU threads than on one, and the thread count that was
+    measured: the median over the benchmark's states (benchmarks/threads.py) at the largest measured count <=
+    threads. (1.0, 1) for one thread or without the table."""
+    by_count: dict = {}
+    try:
+        with open(path, newline="") as f:
+            for row in csv.DictReader(f):
+                by_count.setdefault(int(row["threads"]), []).append(float(row["speedup_vs_first"]))
+    except (OSError, ValueError, KeyError):
+        return 1.0, 1
+    counts = [n for n in by_count if 1 < n <= threads]
+    if not counts:
+        return 1.0, 1
+    n = max(counts)
+    return max(1.0, statistics.median(by_count[n])), n
 
 
 def makespan(seconds: list[float], jobs: int) -> float:
