@@ -568,3 +568,16 @@ def test_the_committed_records_compose_their_figure(tmp_path):
                      "--out", str(tmp_path)]) == 0
         doc = json.loads((tmp_path / f"{name}.half.json").read_text())
         assert all(p["drawn"] and p["run"].startswith("record: ") for p in doc["panels"]), name
+
+
+def test_a_panel_title_wraps_its_label_and_keeps_the_time_on_one_line():
+    from taichimyxo.figures.compose import TITLE_CHARS, panel_title
+
+    short = panel_title("flexible, k_a = 1e-17 N·m", "t = 6 h 00 min")
+    assert short == "flexible, k_a = 1e-17 N·m,  t = 6 h 00 min"
+    long = panel_title("very flexible, k_a = 1e-18 N·m", "t = 6 h 00 min")
+    assert long.splitlines() == ["very flexible, k_a = 1e-18 N·m", "t = 6 h 00 min"]
+    wrapped = panel_title("non-guided rigid cells from the dense aligned start of Fig 3A", "t = 3 h 00 min")
+    assert all(len(line) <= TITLE_CHARS for line in wrapped.splitlines())
+    assert wrapped.splitlines()[-1].endswith("t = 3 h 00 min")
+    assert panel_title("the start", "") == "the start"

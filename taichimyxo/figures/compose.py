@@ -49,6 +49,17 @@ def _colorbar(fig, rect, color: str):
     cb.ax.tick_params(labelsize=8)
 
 
+def panel_title(label: str, when: str) -> str:
+    """A panel's label and time ('t = 6 h 00 min'), wrapped to the panel's width; the time is never split across lines."""
+    lines = textwrap.wrap(label, TITLE_CHARS)
+    if when:
+        if lines and len(lines[-1]) + 3 + len(when) <= TITLE_CHARS:
+            lines[-1] += f",  {when}"
+        else:
+            lines.append(when)
+    return "\n".join(lines)
+
+
 def _scalebar(ax, box) -> None:
     from ..render.layout import nice_scalebar_length
     Lx, Ly = box
@@ -144,8 +155,7 @@ def compose_figure(runs, out: Path) -> list[Path]:
                           run=_source(runs, pt, Path(out)),
                           time_s=frame.time_s if frame is not None else None, drawn=img is not None))
         when = format_time(frame.time_s) if frame is not None else ""
-        title = f"{panel.label}{',  ' + when if when else ''}"
-        ax.set_title("\n".join(textwrap.wrap(title, TITLE_CHARS)), fontsize=9, loc="left", pad=3)
+        ax.set_title(panel_title(panel.label, when), fontsize=9, loc="left", pad=3)
         if i == n - 1:
             _scalebar(ax, box)
     bar_y = top - nrows * (ph + 0.45 / height) - 0.35 / height
