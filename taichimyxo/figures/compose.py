@@ -50,7 +50,7 @@ def _colorbar(fig, rect, color: str):
 
 
 def panel_title(label: str, when: str) -> str:
-    """A panel's label and time ('t = 6 h 00 min'), wrapped to the panel's width; the time is never split across lines."""
+    """A panel's label and time ('t = 6 h 00 min') wrapped to the panel's width, the time never split."""
     lines = textwrap.wrap(label, TITLE_CHARS)
     if when:
         if lines and len(lines[-1]) + 3 + len(when) <= TITLE_CHARS:
