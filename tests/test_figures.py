@@ -586,3 +586,20 @@ def test_a_panel_title_wraps_its_label_and_keeps_the_time_on_one_line():
     assert all(len(line) <= TITLE_CHARS for line in wrapped.splitlines())
     assert wrapped.splitlines()[-1].endswith("t = 3 h 00 min")
     assert panel_title("the start", "") == "the start"
+
+
+def test_dry_run_names_where_a_finished_run_is_instead_of_pricing_it(tmp_path, capsys):
+    """A recorded run shows no cost; a run another figure recorded names that record; a figure with every run
+    finished says so (the committed records: S3 Fig's eight runs, one of them Fig 2's S3 seed 2)."""
+    records = REPO / "docs" / "figures" / "records"
+    assert main(["figures", "Fig2", "S3Fig", "--scale", "half", "--seeds", "2", "--dry-run", "--records",
+                 str(records), "--out", str(tmp_path / "figs")]) == 0
+    text = capsys.readouterr().out
+    lines = {ln.split()[1]: ln for ln in text.splitlines() if ln.startswith("  ")}
+    assert re.search(r"shared +scene=S3_seed=1 +6 h  the record S3Fig\.half/scene=S3FigB_seed=1-\w+\.npz$",
+                     lines["scene=S3_seed=1"])
+    assert lines["scene=S3_seed=2"].split() == ["recorded", "scene=S3_seed=2", "6", "h"]
+    assert "the record Fig2.half/scene=S3_seed=2-" in lines["scene=S3FigB_seed=2"]
+    assert re.search(r"^new +scene=S1_seed=1 +6 h  ~", lines["scene=S1_seed=1"].strip())
+    assert "S3Fig (half, 100 x 100 µm, 500 cells): 8 runs x 2 seeds, 48 simulated hours, every run finished" in text
+    assert not (tmp_path / "figs").exists()

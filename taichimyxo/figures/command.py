@@ -156,7 +156,8 @@ def print_dry_run(plans: list, jobs: int, records: Path | None = None, chosen: s
         w, h = p.points[0].scene.box
         todo = [s for pt, s, st in zip(p.points, secs, states)
                 if st not in FINISHED and (chosen is None or pt.name in chosen)]
-        est = f", about {duration(sum(s for s in todo if s))} of run time left" if None not in secs else ""
+        est = (", every run finished" if all(st in FINISHED for st in states)
+               else f", about {duration(sum(s for s in todo if s))} of run time left" if None not in secs else "")
         print(f"{p.figure.name} ({p.scale_name}, {w:g} x {h:g} µm, {'/'.join(map(str, cells))} cells): "
               f"{len(p.points)} runs x {len(p.sweep.seeds)} seed{'s' if len(p.sweep.seeds) > 1 else ''}, "
               f"{hours:g} simulated hours{est}; {p.figure.scenes}; in {p.root}")
@@ -166,9 +167,14 @@ def print_dry_run(plans: list, jobs: int, records: Path | None = None, chosen: s
             owner = owners.get(run_identity(pt), (p.figure.name, pt.name))
             if st not in FINISHED and st != "not chosen" and owner != (p.figure.name, pt.name):
                 st, s = "shared", None
-            note = f"the same run as {' '.join(owner)}" if st == "shared" else ""
+            if st in FINISHED:              # nothing left to run: say where the run is, not what it would cost
+                rec = p.record_file(pt) if st == "shared" else None
+                s, note = None, (f"the record {rec.parent.name}/{rec.name}" if rec is not None
+                                 else f"the same run as {' '.join(owner)}" if st == "shared" else "")
+            else:
+                note = f"the same run as {' '.join(owner)}" if st == "shared" else ""
             left = f" left ({f:.0%} done)" if f else ""
-            print(f"  {st:<11} {pt.name:<34} {pt.scene.hours:g} h  {'~' + duration(s) + left if s else note}")
+            print(f"  {st:<11} {pt.name:<34} {pt.scene.hours:g} h  {'~' + duration(s) + left if s else note}".rstrip())
             if st not in FINISHED and st != "not chosen" and s:
                 all_secs.append(s)
     runs = sum(len(p.points) for p in plans)
