@@ -549,6 +549,13 @@ def test_dry_run_estimates_from_finished_runs_when_kept(tmp_path, capsys):
     assert main(["figures", "S6Fig", "--scale", "half", "--out", str(out), "--records", str(records),
                  "--dry-run"]) == 0
     assert "the particle-steps/s of the 1 finished run kept in" in capsys.readouterr().out
+    # a run on two threads stands for the one-thread rate its measured speed-up implies
+    from taichimyxo.figures.plan import thread_speedup
+    summary.write_text(json.dumps({"completed": True, "cpu_threads": 2, "steps": sc.steps, "particles": 1000,
+                                   "wall_seconds_total": sc.steps * 1000 / 3e6, "scene_values": sc.to_dict()}))
+    write_record(record_path(records, runs, pt), runs.trajectory(pt), None, summary, first=False)
+    ((particles, rate),) = measured_rates(records)[("S3", "explicit")]
+    assert particles == 1000 and rate == pytest.approx(3e6 / thread_speedup(2)[0])
 
 
 def test_the_committed_records_compose_their_figure(tmp_path):

@@ -222,8 +222,10 @@ def _measured_kind(scene) -> tuple:
 
 
 def measured_rates(records: Path | None) -> dict:
-    """(benchmark scene kind, integrator) -> [(particles, particle-steps/s)] of finished figure runs kept as records
-    (taichimyxo.figures.records) that ran on one CPU thread: whole runs, formed states included."""
+    """(benchmark scene kind, integrator) -> [(particles, one-thread particle-steps/s)] of finished figure runs kept
+    as records (taichimyxo.figures.records): whole runs, formed states included. A run on N threads counts at its
+    rate / thread_speedup(N), the one-thread rate it stands for (so a paper-scale run on two cores prices the next
+    one at its own size)."""
     out: dict = {}
     if records is None or not Path(records).is_dir():
         return out
@@ -232,13 +234,14 @@ def measured_rates(records: Path | None) -> dict:
     for path in sorted(Path(records).glob("*/*.npz")):
         try:
             s = Record(path).summary or {}
-            if s.get("cpu_threads") != 1 or not s.get("completed") or not s.get("wall_seconds_total"):
+            threads = int(s.get("cpu_threads") or 0)
+            if threads < 1 or not s.get("completed") or not s.get("wall_seconds_total"):
                 continue
             scene = Scene.from_dict(s["scene_values"])
-        except (OSError, ValueError, KeyError, SceneError):
+        except (OSError, ValueError, KeyError, TypeError, SceneError):
             continue
         out.setdefault(_measured_kind(scene), []).append(
-            (int(s["particles"]), s["steps"] * s["particles"] / s["wall_seconds_total"]))
+            (int(s["particles"]), s["steps"] * s["particles"] / s["wall_seconds_total"] / thread_speedup(threads)[0]))
     return out
 
 
