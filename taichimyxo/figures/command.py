@@ -167,12 +167,13 @@ def print_dry_run(plans: list, jobs: int, records: Path | None = None, chosen: s
             owner = owners.get(run_identity(pt), (p.figure.name, pt.name))
             if st not in FINISHED and st != "not chosen" and owner != (p.figure.name, pt.name):
                 st, s = "shared", None
+            note = ""
             if st in FINISHED:              # nothing left to run: say where the run is, not what it would cost
                 rec = p.record_file(pt) if st == "shared" else None
-                s, note = None, (f"the record {rec.parent.name}/{rec.name}" if rec is not None
-                                 else f"the same run as {' '.join(owner)}" if st == "shared" else "")
-            else:
-                note = f"the same run as {' '.join(owner)}" if st == "shared" else ""
+                s = None
+                if st == "shared":
+                    note = (f"the record {rec.parent.name}/{rec.name}" if rec is not None
+                            else f"the same run as {' '.join(owner)}")
             left = f" left ({f:.0%} done)" if f else ""
             print(f"  {st:<11} {pt.name:<34} {pt.scene.hours:g} h  {'~' + duration(s) + left if s else note}".rstrip())
             if st not in FINISHED and st != "not chosen" and s:
