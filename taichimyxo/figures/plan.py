@@ -231,6 +231,7 @@ def measured_rates(records: Path | None) -> dict:
         return out
     from ..scene import Scene
     from .records import Record
+    speedup: dict = {}                      # threads -> thread_speedup, its table read once per count
     for path in sorted(Path(records).glob("*/*.npz")):
         try:
             s = Record(path).summary or {}
@@ -240,8 +241,10 @@ def measured_rates(records: Path | None) -> dict:
             scene = Scene.from_dict(s["scene_values"])
         except (OSError, ValueError, KeyError, TypeError, SceneError):
             continue
+        if threads not in speedup:
+            speedup[threads] = thread_speedup(threads)[0]
         out.setdefault(_measured_kind(scene), []).append(
-            (int(s["particles"]), s["steps"] * s["particles"] / s["wall_seconds_total"] / thread_speedup(threads)[0]))
+            (int(s["particles"]), s["steps"] * s["particles"] / s["wall_seconds_total"] / speedup[threads]))
     return out
 
 
