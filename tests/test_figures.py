@@ -579,7 +579,7 @@ def test_the_committed_records_compose_their_figure(tmp_path):
         doc = json.loads((tmp_path / f"{name}.half.json").read_text())
         assert all(p["drawn"] and p["run"].startswith("record: ") for p in doc["panels"]), name
         composed.append(name)
-    assert {"Fig3", "S3Fig", "S6Fig"} <= set(composed)
+    assert {"Fig3", "Fig4", "S3Fig", "S6Fig"} <= set(composed)
 
 
 def test_a_panel_title_wraps_its_label_and_keeps_the_time_on_one_line():
