@@ -392,6 +392,11 @@ def test_stiffness_statements_judged_and_not_measurable():
     assert rows["stiffness_aggregates_larger_fewer"]["status"] == "not consistent"
     assert rows["stiffness_very_rigid_none"]["status"] == "not consistent"
     assert rows["stiffness_clusters_non_guided"]["status"].startswith("not measurable here: needs non-guided runs")
+    # Rising, the two stiffest swapped: rho exactly 0.8 (6 * 2 / (4 * 15) from 1), at the rule's bound.
+    plateau = _records("non-guided", {ka: dict(mean_cluster_size=s) for ka, s in
+                                      ((1e-18, 16.0), (1e-17, 75.0), (1e-16, 184.0), (1e-15, 181.0))})
+    row = {r["id"]: r for r in stiffness_rows(plateau)}["stiffness_clusters_non_guided"]
+    assert row["status"] == "consistent" and "Spearman rho against k_a +0.80" in row["measured"]
     short = _records("active", {1e-18: act(12, 8, 0.5), 1e-17: act(6, 20, 0.5), 1e-16: act(3, 40, 0.4)}, hours=0.17)
     rows = {r["id"]: r for r in stiffness_rows(short)}
     assert rows["stiffness_aggregates_larger_fewer"]["status"].startswith("not measurable here: runs of 10 simulated")
