@@ -573,18 +573,21 @@ def test_the_committed_records_compose_their_figure(tmp_path):
     assert all(Record(k).frame("last") is not None for k in kept)          # a figure's runs may still be running
     composed = []
     for name in sorted({k.parent.name.split(".")[0] for k in kept}):
-        seeds = max(int(m) for m in re.findall(r"seed=(\d+)", " ".join(k.name for k in kept
-                                                                      if k.parent.name == f"{name}.half")))
-        runs = plan_figure(FIGURES[name], "half", tmp_path, seeds)
-        runs.records = records
-        if any(st not in ("recorded", "shared") for st in runs.states()):
+        most = max(int(m) for m in re.findall(r"seed=(\d+)", " ".join(k.name for k in kept
+                                                                     if k.parent.name == f"{name}.half")))
+        for seeds in range(most, 0, -1):                  # the most seeds whose runs are all kept
+            runs = plan_figure(FIGURES[name], "half", tmp_path, seeds)
+            runs.records = records
+            if all(st in ("recorded", "shared") for st in runs.states()):
+                break
+        else:
             continue
         assert main(["figures", name, "--scale", "half", "--seeds", str(seeds), "--no-run", "--records", str(records),
                      "--out", str(tmp_path)]) == 0
         doc = json.loads((tmp_path / f"{name}.half.json").read_text())
         assert all(p["drawn"] and p["run"].startswith("record: ") for p in doc["panels"]), name
         composed.append(name)
-    assert {"Fig3", "Fig4", "S3Fig", "S6Fig"} <= set(composed)
+    assert {"Fig2", "Fig3", "Fig4", "S2Fig", "S3Fig", "S6Fig"} <= set(composed)
 
 
 def test_a_panel_title_wraps_its_label_and_keeps_the_time_on_one_line():
