@@ -572,22 +572,23 @@ def test_the_committed_records_compose_their_figure(tmp_path):
     assert kept, "no committed records"
     assert all(Record(k).frame("last") is not None for k in kept)          # a figure's runs may still be running
     composed = []
-    for name in sorted({k.parent.name.split(".")[0] for k in kept}):
+    for folder in sorted({k.parent.name for k in kept}):          # one folder per figure and scale: "Fig3.half"
+        name, scale = folder.split(".")
         most = max(int(m) for m in re.findall(r"seed=(\d+)", " ".join(k.name for k in kept
-                                                                     if k.parent.name == f"{name}.half")))
+                                                                     if k.parent.name == folder)))
         for seeds in range(most, 0, -1):                  # the most seeds whose runs are all kept
-            runs = plan_figure(FIGURES[name], "half", tmp_path, seeds)
+            runs = plan_figure(FIGURES[name], scale, tmp_path, seeds)
             runs.records = records
             if all(st in ("recorded", "shared") for st in runs.states()):
                 break
         else:
             continue
-        assert main(["figures", name, "--scale", "half", "--seeds", str(seeds), "--no-run", "--records", str(records),
+        assert main(["figures", name, "--scale", scale, "--seeds", str(seeds), "--no-run", "--records", str(records),
                      "--out", str(tmp_path)]) == 0
-        doc = json.loads((tmp_path / f"{name}.half.json").read_text())
-        assert all(p["drawn"] and p["run"].startswith("record: ") for p in doc["panels"]), name
-        composed.append(name)
-    assert {"Fig2", "Fig3", "Fig4", "S2Fig", "S3Fig", "S6Fig"} <= set(composed)
+        doc = json.loads((tmp_path / f"{folder}.json").read_text())
+        assert all(p["drawn"] and p["run"].startswith("record: ") for p in doc["panels"]), folder
+        composed.append(folder)
+    assert {"Fig2.half", "Fig3.half", "Fig4.half", "S2Fig.half", "S3Fig.half", "S6Fig.half"} <= set(composed)
 
 
 def test_a_panel_title_wraps_its_label_and_keeps_the_time_on_one_line():
