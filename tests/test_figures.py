@@ -566,6 +566,7 @@ def test_dry_run_estimates_from_finished_runs_when_kept(tmp_path, capsys):
 def test_the_committed_records_compose_their_figure(tmp_path):
     """The runs this project made and kept in docs/figures/records compose their figure on a machine without the
     runs (as a user's checkout is): every panel drawn, from the records."""
+    from taichimyxo.figures.compose import figure_files
     from taichimyxo.figures.records import Record
     records = REPO / "docs" / "figures" / "records"
     kept = sorted(records.glob("*/*.npz"))
@@ -585,10 +586,11 @@ def test_the_committed_records_compose_their_figure(tmp_path):
             continue
         assert main(["figures", name, "--scale", scale, "--seeds", str(seeds), "--no-run", "--records", str(records),
                      "--out", str(tmp_path)]) == 0
-        doc = json.loads((tmp_path / f"{folder}.json").read_text())
+        doc = json.loads(figure_files(runs, tmp_path)["json"].read_text())      # Fig3.json at paper scale
         assert all(p["drawn"] and p["run"].startswith("record: ") for p in doc["panels"]), folder
         composed.append(folder)
-    assert {"Fig2.half", "Fig3.half", "Fig4.half", "S2Fig.half", "S3Fig.half", "S6Fig.half"} <= set(composed)
+    assert {"Fig2.half", "Fig3.half", "Fig3.paper", "Fig4.half", "S2Fig.half", "S3Fig.half",
+            "S6Fig.half"} <= set(composed)
 
 
 def test_a_panel_title_wraps_its_label_and_keeps_the_time_on_one_line():
