@@ -123,13 +123,15 @@ def analyze(trajectory, out_dir=None, *, every: int = 1, v_b: float | None = Non
 
 def claims(trajectories, out_dir=None, *, every: int = 1, v_b: float | None = None, plots: bool = True,
            progress=None) -> dict:
-    """The paper's claims measured on one or more GSD trajectories (what ``python -m taichimyxo claims`` does):
-    claims.md, claims.csv, claims.json and a plot per claim in out_dir (default: the current folder). Returns
-    dict(rows, runs, files); each row: claim, measured, paper, status, runs. Every file is checked (a missing file
-    or one that is not a trajectory of cells is a TrajectoryError) and the output folder proved writable before any
-    analysis; the tables are replaced only by complete ones."""
+    """The paper's claims measured on one or more GSD trajectories (what ``python -m taichimyxo claims`` does), or
+    on runs kept as records by ``figures`` (their analysis as made when the run finished): claims.md, claims.csv,
+    claims.json and a plot per claim in out_dir (default: the current folder). Returns dict(rows, runs, files);
+    each row: claim, measured, paper, status, runs. Every file is checked (a missing file, or one that is neither
+    a trajectory of cells nor a record with its analysis, is a TrajectoryError) and the output folder proved
+    writable before any analysis; the tables are replaced only by complete ones."""
+    from .analysis.claim_runs import check_run_file
     from .scene_run import check_output_dir
-    from .trajectory import TrajectoryError, check_trajectory
+    from .trajectory import TrajectoryError
     if isinstance(trajectories, (str, os.PathLike)):
         trajectories = [trajectories]
     paths = [os.fspath(p) for p in trajectories]
@@ -142,7 +144,7 @@ def claims(trajectories, out_dir=None, *, every: int = 1, v_b: float | None = No
                                   "give each run once")
         seen[os.path.realpath(p)] = p
     for p in paths:
-        check_trajectory(p)
+        check_run_file(p, every, v_b)
     check_output_dir(os.fspath(out_dir) if out_dir else ".")
     from .analysis.claims import claims as measure_claims
     return measure_claims(paths, out_dir=os.fspath(out_dir) if out_dir else None, every=every, v_b=v_b, plots=plots,

@@ -107,8 +107,9 @@ def _build_parser() -> argparse.ArgumentParser:
                    "the orientation field, µm (default 5, one cell length; its grid is half of it, at most 2.5 µm)")
 
     c = sub.add_parser("claims", help="the paper's claims measured on runs, one table (markdown, CSV, JSON + plots)")
-    c.add_argument("trajectories", nargs="+", metavar="RUN.gsd", help="GSD trajectories written by taichimyxo; each "
-                   "run's guiding (non-guided, passive, active, adhesion, slime) is read from the scene it stores")
+    c.add_argument("trajectories", nargs="+", metavar="RUN.gsd", help="GSD trajectories written by taichimyxo, or "
+                   "runs kept as records by `figures` (RECORDS/NAME.SCALE/*.npz: their analysis as made); each run's "
+                   "guiding (non-guided, passive, active, adhesion, slime) is read from the scene it stores")
     c.add_argument("--out", help="output folder for claims.md/.csv/.json and claims.*.png (default: current folder)")
     c.add_argument("--every", type=positive_int, default=1, help="analyse every K-th frame")
     c.add_argument("--v-b", type=float, default=None, help="free-cell speed, µm/min (default: each run's scene)")

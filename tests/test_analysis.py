@@ -682,6 +682,56 @@ def test_claims_cli_bad_input_and_run(tmp_path, capsys):
     assert [r["n_frames_analyzed"] for r in j["runs"]] == [6, 2]
 
 
+def test_claims_on_records_match_claims_on_their_trajectories(tmp_path, capsys):
+    """A run kept as a record by `figures` (its last frame and the analysis made when it finished) gives the claims
+    table its trajectory gives, row for row; a record made before records kept the rigidity exponents says so in the
+    rigid row; a record cannot be re-analysed (--every) and a file that is no record is refused: one line, exit 2,
+    nothing written."""
+    from pathlib import Path
+
+    import numpy as np
+
+    from taichimyxo.analysis import analyze
+    from taichimyxo.analysis.claims import claims
+    from taichimyxo.figures.records import write_record
+    paths = _claims_runs(tmp_path)
+    records = []
+    for p in paths.values():
+        a = analyze(p, plots=False)
+        records.append(write_record(tmp_path / "kept" / Path(p).with_suffix(".npz").name, Path(p),
+                                    Path(p).with_suffix(".analysis.json"), None, first=False))
+        assert a["meta"]["n_frames_analyzed"] > 0
+    table = lambda res: [(r["id"], r["status"], r["measured"]) for r in res["rows"]]      # noqa: E731
+    on_runs = claims(list(paths.values()), out_dir=str(tmp_path / "runs"), plots=False)
+    on_records = claims([str(r) for r in records], out_dir=str(tmp_path / "records"), plots=False)
+    assert table(on_records) == table(on_runs)
+    assert {r["id"]: r["status"] for r in on_records["rows"]}["rigid_rotation"] == "consistent"
+    assert all(r["path"].startswith("../kept/") for r in on_records["runs"])
+    old = tmp_path / "old" / "act.npz"            # the tracks without their per-frame rigidity exponents
+    old.parent.mkdir()
+    with np.load(records[0]) as z:
+        arrays = {k: z[k] for k in z.files}
+    a = json.loads(arrays["analysis_json"].tobytes().decode())
+    for tr in a["tracks"]:
+        tr["series"].pop("rigidity_exponent")
+    arrays["analysis_json"] = np.frombuffer(json.dumps(a).encode(), np.uint8)
+    np.savez_compressed(old, **arrays)
+    rigid = {r["id"]: r for r in claims([str(old)], out_dir=str(tmp_path / "old_out"), plots=False)["rows"]}[
+        "rigid_rotation"]
+    assert rigid["status"].startswith("not measurable here: the records of these runs keep no rigidity exponents")
+    assert "its record keeps no rigidity exponents" in rigid["measured"]
+    out = tmp_path / "out"
+    not_a_record = tmp_path / "bad.npz"
+    not_a_record.write_text("not a record")
+    for argv, says in (([str(records[0]), "--every", "2"], "cannot be analysed otherwise"),
+                       ([str(not_a_record)], "is not a run record"),
+                       ([str(tmp_path / "gone.npz")], "not found")):
+        assert cli_main(["claims", *argv, "--out", str(out)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and says in err
+    assert not out.exists()
+
+
 def test_series_se_allows_for_correlated_frames():
     """Batch-means SE of a time series: like the naive SE for independent values, several times larger for
     strongly correlated ones (AR(1), rho = 0.9: the exact inflation is sqrt(1.9 / 0.1) = 4.4)."""

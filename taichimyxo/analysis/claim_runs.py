@@ -59,26 +59,78 @@ def plus_minus(m, se, spec=".2f"):
     return f"{m:{spec}} ± {se:{spec}}" if math.isfinite(se) else f"{m:{spec}}"
 
 
+def is_record(path) -> bool:
+    """A run kept by `figures` as a record (taichimyxo.figures.records), not a trajectory."""
+    return os.fspath(path).endswith(".npz")
+
+
+def check_record(path, every: int = 1, v_b: float | None = None, **params):
+    """Refuse, before any work, a record claims cannot use: missing, not a record, without its scene or analysis,
+    or asked to be analysed otherwise than it was (a record keeps its run's analysis, not its frames). Returns
+    the Record."""
+    import zipfile
+
+    from ..figures.records import Record
+    from ..trajectory import TrajectoryError
+    if not os.path.isfile(path):
+        raise TrajectoryError(f"record {path} not found")
+    try:
+        rec = Record(path)
+        analysis = rec.analysis
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as e:
+        why = str(e).splitlines()[0] if str(e) else repr(e)
+        raise TrajectoryError(f"{path} is not a run record of `figures` ({why})") from None
+    if not analysis or not rec.meta:
+        raise TrajectoryError(f"{path}: the record keeps no analysis summary or no scene; give its run's trajectory")
+    m, kept = analysis.get("meta", {}), analysis.get("parameters", {})
+    made_vb = float(m.get("v_b_um_per_min", float("nan")))
+    other = [k for k, x in params.items() if kept.get(k) != x]
+    if int(m.get("every", 1)) != every or (v_b is not None and not math.isclose(v_b, made_vb)) or other:
+        raise TrajectoryError(f"{path}: a record keeps its run's analysis as made (every {m.get('every', 1)}, v_b "
+                              f"{made_vb:g} µm/min{', ' + ', '.join(other) + ' as kept' if other else ''}) and "
+                              "cannot be analysed otherwise; give its run's trajectory")
+    return rec
+
+
+def check_run_file(path, every: int = 1, v_b: float | None = None, **params) -> None:
+    """check_trajectory for a trajectory, check_record for a record: bad input refused before any analysis."""
+    from ..trajectory import check_trajectory
+    if is_record(path):
+        check_record(path, every, v_b, **params)
+    else:
+        check_trajectory(path)
+
+
 def load_runs(paths, every: int = 1, v_b: float | None = None, progress=None, **params) -> list[dict]:
-    """Analyse each trajectory. Every path is checked first (a missing or unreadable file is a TrajectoryError before
-    any analysis). Returns dicts(label, path, kind, v_b, summary, scene)."""
+    """Analyse each trajectory; a record (`figures --records`) brings the analysis its run made when it finished.
+    Every path is checked first (a missing or unreadable file is a TrajectoryError before any analysis). Returns
+    dicts(label, path, kind, v_b, summary, scene, record)."""
     from ..trajectory import check_trajectory, read_frames, read_scene
     paths = [os.fspath(p) for p in paths]
     if not paths:
         raise ValueError("claims needs at least one trajectory")
-    scenes = []
+    scenes, kept = [], {}
     for p in paths:
-        check_trajectory(p)
-        scenes.append(read_scene(p))
+        if is_record(p):
+            kept[p] = check_record(p, every, v_b, **params)
+            scenes.append(kept[p].meta)
+        else:
+            check_trajectory(p)
+            scenes.append(read_scene(p))
     labels = [os.path.splitext(os.path.basename(p))[0] for p in paths]
     runs = []
     for p, sc, lab in zip(paths, scenes, labels):
-        if progress:
-            progress(f"analysing {p}")
-        vb = v_b if v_b is not None else float((sc.get("cell") or {}).get("speed_um_per_min", 4.0) or 4.0)
-        s = analyze_frames(read_frames(p, every=every), v_b=vb, **params)
+        if p in kept:
+            s = kept[p].analysis
+            vb = float(s["meta"]["v_b_um_per_min"])
+        else:
+            if progress:
+                progress(f"analysing {p}")
+            vb = v_b if v_b is not None else float((sc.get("cell") or {}).get("speed_um_per_min", 4.0) or 4.0)
+            s = analyze_frames(read_frames(p, every=every), v_b=vb, **params)
         label = lab if labels.count(lab) == 1 else p
-        runs.append(dict(label=label, path=os.path.abspath(p), kind=run_kind(sc), v_b=vb, summary=s, scene=sc))
+        runs.append(dict(label=label, path=os.path.abspath(p), kind=run_kind(sc), v_b=vb, summary=s, scene=sc,
+                         record=is_record(p)))
     return runs
 
 

@@ -184,11 +184,17 @@ def compose_figure(runs, out: Path) -> list[Path]:
 
 def write_claims(runs, out: Path) -> list[Path]:
     """The claims table (taichimyxo.analysis.claims) over the figure's runs, in OUT/NAME[.SCALE].claims/: what the
-    paper says of the runs the figure shows, measured on them. Needs their trajectories: with a run kept only as a
-    record, nothing is written (the table made where the runs finished stands)."""
+    paper says of the runs the figure shows, measured on their trajectories, or on the analysis its record kept
+    where a run's folder is gone. Without either for every run, nothing is written."""
     from ..analysis.claims import claims
-    paths = [runs.trajectory(pt) for pt in runs.points]
-    if not all(p.is_file() for p in paths):
+
+    def source(pt):
+        if runs.trajectory(pt).is_file():
+            return runs.trajectory(pt)
+        rec = runs.record(pt)
+        return rec.path if rec is not None and rec.analysis else None
+    paths = [source(pt) for pt in runs.points]
+    if None in paths:
         return []
     folder = Path(out) / f"{figure_files(runs, out)['png'].stem}.claims"
     return [Path(f) for f in claims([str(p) for p in paths], out_dir=str(folder))["files"]]

@@ -58,7 +58,7 @@ def _frame(z, prefix: str, meta: dict) -> Frame:
                  segment_strain=strain, meta=meta)
 
 
-TRACK_SERIES = ("time_min", "n_cells")     # what the stiffness series reads of a track's frames
+TRACK_SERIES = ("time_min", "n_cells", "rigidity_exponent")    # what the stiffness series and claims read of them
 
 
 def slim_analysis(a: dict) -> dict:
