@@ -586,8 +586,12 @@ def test_the_committed_records_compose_their_figure(tmp_path):
             continue
         assert main(["figures", name, "--scale", scale, "--seeds", str(seeds), "--no-run", "--records", str(records),
                      "--out", str(tmp_path)]) == 0
-        doc = json.loads(figure_files(runs, tmp_path)["json"].read_text())      # Fig3.json at paper scale
+        files = figure_files(runs, tmp_path)
+        doc = json.loads(files["json"].read_text())      # Fig3.json at paper scale
         assert all(p["drawn"] and p["run"].startswith("record: ") for p in doc["panels"]), folder
+        if not FIGURES[name].stiffness:                  # the claims table, measured on the records' analyses
+            table = json.loads((tmp_path / f"{files['json'].stem}.claims" / "claims.json").read_text())
+            assert all(r["path"].endswith(".npz") for r in table["runs"]), folder
         composed.append(folder)
     assert {"Fig2.half", "Fig3.half", "Fig3.paper", "Fig4.half", "S2Fig.half", "S3Fig.half",
             "S6Fig.half"} <= set(composed)
