@@ -134,6 +134,11 @@ def load_runs(paths, every: int = 1, v_b: float | None = None, progress=None, **
     return runs
 
 
+def rigidity_unkept(r) -> bool:
+    """A run read from a record whose aggregate tracks keep no per-frame rigidity exponents (an older record)."""
+    return bool(r.get("record")) and any("rigidity_exponent" not in t["series"] for t in r["summary"]["tracks"])
+
+
 def runs_of(runs, *kinds):
     return [r for r in runs if r["kind"] in kinds]
 

@@ -69,6 +69,7 @@ from .claim_runs import (
     mean_se,
     needs,
     plus_minus,
+    rigidity_unkept,
     runs_of,
     speed_span_min,
     stable_tracks,
@@ -176,11 +177,6 @@ def fraction_in_aggregates(runs, shared):
                 "2B); no fraction is given (at 6 h)", runs, "; ".join(parts), status, vals, plot="fraction")
 
 
-def _unkept(r) -> bool:
-    """A run read from a record whose aggregate tracks keep no per-frame rigidity exponents (an older record)."""
-    return bool(r.get("record")) and any("rigidity_exponent" not in t["series"] for t in r["summary"]["tracks"])
-
-
 @claim("rigid_rotation")
 def rigid_rotation(runs, shared):
     """The rigidity exponent of the speed-against-radius profile (aggregate_measure)."""
@@ -189,9 +185,8 @@ def rigid_rotation(runs, shared):
         al = [x for t in r["summary"]["tracks"] for x in t["series"].get("rigidity_exponent", []) if x is not None]
         if not al:
             if r["kind"] in ("active", "adhesion", "slime"):
-                parts.append(f"{_kind_label(r)} {r['label']}: " + ("its record keeps no rigidity exponents (made "
-                             "before records kept them; claims on its trajectory measure them)" if _unkept(r) else
-                             "no aggregate spanning radii by a factor of 2"))
+                parts.append(f"{_kind_label(r)} {r['label']}: " + ("its record keeps no rigidity exponents" if
+                             rigidity_unkept(r) else "no aggregate spanning radii by a factor of 2"))
             continue
         q = np.percentile(al, [25, 50, 75])
         vals[r["label"]] = dict(kind=r["kind"], median=float(q[1]), quartiles=[float(q[0]), float(q[2])], n=len(al),
@@ -201,14 +196,14 @@ def rigid_rotation(runs, shared):
         if r["kind"] in ("active", "adhesion"):
             judged += al
     sr = runs_of(runs, "active", "adhesion")
+    unkept = not judged and any(map(rigidity_unkept, sr))
     status = (needs("active") if not sr else "not measurable here: the records of these runs keep no rigidity "
-              "exponents; claims on their trajectories measure them" if not judged and any(map(_unkept, sr)) else
-              "not measurable here: no aggregate of these runs spans radii by a "
-              "factor of 2 (a ring of cells, or a run too short to form larger aggregates)" if not judged else
-              "consistent" if float(np.median(judged)) >= RIGID_EXPONENT else "not consistent")
+              "exponents; claims on their trajectories measure them" if unkept else "not measurable here: no "
+              "aggregate of these runs spans radii by a factor of 2 (a ring of cells, or a run too short to form "
+              "larger aggregates)" if not judged else "consistent" if float(np.median(judged)) >= RIGID_EXPONENT
+              else "not consistent")
     return _row("rigid_rotation", "Aggregates rotate as rigid bodies (rigidity exponent α, speed ~ r^α over "
-                f"an aggregate's particles; rigid when α >= {RIGID_EXPONENT:g}; 1 rigid, 0 every cell at one "
-                "speed)",
+                f"an aggregate's particles; rigid when α >= {RIGID_EXPONENT:g}; 1 rigid, 0 every cell at one speed)",
                 "stable rotating aggregates rotate as rigid bodies: cells do not slide laterally, cells in the "
                 "centre move slower than at the edge (short-range guiding); with slime trails most cells move "
                 "at v_b", runs, "; ".join(parts) or "no aggregates", status, vals, plot="rigid")
