@@ -682,6 +682,27 @@ def test_claims_cli_bad_input_and_run(tmp_path, capsys):
     assert [r["n_frames_analyzed"] for r in j["runs"]] == [6, 2]
 
 
+def test_a_cell_curled_onto_its_own_tail_is_not_free():
+    """A cell whose head reaches its own tail touches no other cell and is still not free: under guiding its head
+    follows its own tail ("another (or the same) bacterium"; such cells move at 1.16 v_b in S3). The free-cell
+    speed is the straight, untouched cells' v_b, not raised by it."""
+    from taichimyxo.analysis.clusters import touches_own_tail
+    from taichimyxo.analysis.summary import analyze_frames
+    from taichimyxo.frame import Frame
+    N, W, l0 = 8, 0.5, 0.64
+    straight = [np.stack([x0 + np.arange(N) * l0, np.full(N, y0)], 1) for x0, y0 in ((5, 5), (5, 25), (25, 5))]
+    R, th = N * l0 / (2 * np.pi), np.arange(N) * 2 * np.pi / N     # head and tail one particle spacing apart
+    curled = np.stack([35 + R * np.cos(th), 35 + R * np.sin(th)], 1)
+    pos = np.stack(straight + [curled])
+    assert touches_own_tail(pos, W).tolist() == [False, False, False, True]
+    speed = np.repeat(np.array([[V_B], [V_B], [V_B], [1.16 * V_B]], np.float32), N, axis=1)
+    frames = [Frame(time_s=60.0 * k, step=k, box=(50.0, 50.0), width_um=W, positions=pos + 0.5 * k,
+                    engine_direction=np.ones(4, np.int8), particle_speed=speed) for k in range(3)]
+    ts = analyze_frames(frames, v_b=V_B)["timeseries"]
+    assert ts["n_free_cells"] == [3, 3, 3]
+    assert ts["free_cell_speed_um_per_min"] == pytest.approx([V_B] * 3)
+
+
 def test_claims_on_records_match_claims_on_their_trajectories(tmp_path, capsys):
     """A run kept as a record by `figures` (its last frame and the analysis made when it finished) gives the claims
     table its trajectory gives, row for row; a record made before records kept the rigidity exponents says so in the

@@ -11,8 +11,8 @@ The claims (Janulevicius et al. 2015) and how each is measured; "± SE" over fra
 (stats.series_mean_se: blocks of sqrt(n) successive frames, so the correlation of successive frames widens it; NaN
 below 8 frames), "± SE over tracks" over aggregates followed in time:
 
-1. free_cell_speed: cells touching no other cell (clusters of one) move at v_b. Per run: the mean over frames of
-   their mean speed / v_b ± SE over frames. Consistent when within 5 % (+ 2 SE) of 1.
+1. free_cell_speed: cells touching no other cell (clusters of one) nor their own tail (a curled cell's head follows
+   it) move at v_b. Per run: the mean over frames of their mean speed / v_b ± SE. Consistent within 5 % (+ 2 SE) of 1.
 2. speed_p95_guided_vs_non_guided: the 95th percentile of cell speed, mean over frames / v_b ± SE. Short-range
    guiding that speeds cells up (active following, adhesion) drives cells above v_b; without guiding nothing does.
    Consistent when every active-following or adhesion run lies above every non-guided one.
@@ -131,7 +131,7 @@ def free_cell_speed(runs, shared):
     status = ("no free cells in these runs" if not ok else
               "consistent" if all(abs(v["mean_vb"] - 1) <= 0.05 + 2 * np.nan_to_num(v["se"]) for v in ok)
               else "not consistent")
-    return _row("free_cell_speed", "Free cells (touching no other cell) move at v_b",
+    return _row("free_cell_speed", "Free cells (touching no other cell nor their own tail) move at v_b",
                 "a freely moving bacterium moves at its equilibrium speed v_b = 4 µm/min", runs,
                 "; ".join(parts), status, vals)
 

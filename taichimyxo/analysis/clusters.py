@@ -87,3 +87,15 @@ def cell_clusters(positions: np.ndarray, box, width: float, tol: float = DEFAULT
     ci, cj = ci[m], cj[m]
     lab = connected_components(n, ci, cj)
     return lab, np.bincount(lab), ci, cj
+
+
+def touches_own_tail(positions: np.ndarray, width: float, tol: float = DEFAULTS["contact_tol_um"]) -> np.ndarray:
+    """(n_cells,) bool: a cell curled round on itself, a particle of its head segment closer than ``W + tol`` to a
+    particle of its tail segment (the contact rule above, within one cell). Such a cell touches no other cell and is
+    still not free: its head follows its own tail under guiding (docs/model.md, term 5, "another (or the same)
+    bacterium"). Symmetric in head and tail; chains are stored unwrapped, so no minimum image is needed."""
+    p = np.asarray(positions, float)
+    if p.ndim != 3 or p.shape[1] < 4:
+        return np.zeros(len(p), bool)
+    d = np.linalg.norm(p[:, :2, None, :] - p[:, None, -2:, :], axis=-1)
+    return d.min(axis=(1, 2)) < width + tol

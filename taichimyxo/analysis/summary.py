@@ -25,7 +25,7 @@ from ..frame import Frame
 from .aggregate_measure import RIGID_EXPONENT
 from .aggregates import find_aggregates
 from .cells import CellGeometry
-from .clusters import cell_clusters
+from .clusters import cell_clusters, touches_own_tail
 from .measure_plots import write_measure_plots
 from .measures import Measures, finish_measures
 from .params import PAPER, R_BINS, fill_cell_defaults, parameters
@@ -145,7 +145,7 @@ def analyze_frames(frames: Iterable[Frame], v_b: float = 4.0, measures=None, **p
             e = geo.strain.mean(axis=1)
             ts["strain_inside_aggregates_J"].append(float(e[inside].mean()) if inside.any() else float("nan"))
             ts["strain_outside_aggregates_J"].append(float(e[~inside].mean()) if (~inside).any() else float("nan"))
-        free = csize == 1
+        free = (csize == 1) & ~touches_own_tail(geo.pos, geo.W, P["contact_tol_um"])
         ts["n_free_cells"].append(int(free.sum()))
         last_geo = (geo, aggs)
         if not np.any(geo.pspeed > 0):
@@ -155,7 +155,7 @@ def analyze_frames(frames: Iterable[Frame], v_b: float = 4.0, measures=None, **p
             ts["free_cell_speed_um_per_min"].append(float("nan"))
             ts["speed_p95_um_per_min"].append(float("nan"))
             continue
-        # free cells: touching no other cell (clusters of one)
+        # free cells: touching no other cell (clusters of one) nor their own tail
         ts["free_cell_speed_um_per_min"].append(float(geo.cspeed[free].mean()) if free.any() else float("nan"))
         ts["speed_p95_um_per_min"].append(float(np.percentile(geo.cspeed, 95.0)))
         for a in aggs:
