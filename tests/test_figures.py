@@ -561,6 +561,9 @@ def test_dry_run_estimates_from_finished_runs_when_kept(tmp_path, capsys):
     write_record(record_path(records, runs, pt), runs.trajectory(pt), None, summary, first=False)
     ((particles, rate),) = measured_rates(records)[("S3", "explicit")]
     assert particles == 1000 and rate == pytest.approx(3e6 / thread_speedup(2)[0])
+    # several finished runs at the nearest size price a run at their median, whichever of them sorts first
+    rows = {("S3", "explicit"): [(1000, 4e6), (1000, 1e6), (1000, 2e6), (4000, 9e6)]}
+    assert run_seconds(other, bench_rates(), rows) == other.steps * other.n_cells * other.N / 2e6
 
 
 def test_the_committed_records_compose_their_figure(tmp_path):

@@ -250,10 +250,14 @@ def measured_rates(records: Path | None) -> dict:
 
 def run_seconds(scene, rates: dict, measured: dict | None = None) -> float | None:
     """Estimated wall seconds of one run on one thread: its steps x particles at the rate of finished runs of the
-    same kind of scene and integrator (`measured`, measured_rates) at the nearest size, else at the benchmark's
-    rate times FORMED_STATE_FACTOR; None without either."""
+    same kind of scene and integrator (`measured`, measured_rates) at the nearest size (the median where several
+    ran at it: runs of one kind differ by their seed and by what ran beside them), else at the benchmark's rate
+    times FORMED_STATE_FACTOR; None without either."""
     particles = scene.n_cells * scene.N
-    nearest = lambda rows: min(rows, key=lambda r: abs(math.log(r[0] / max(particles, 1))))[1]   # noqa: E731
+
+    def nearest(rows):
+        dist = [abs(math.log(n / max(particles, 1))) for n, _ in rows]
+        return statistics.median(r for (_, r), d in zip(rows, dist) if d == min(dist))
     rows = (measured or {}).get(_measured_kind(scene))
     if rows:
         return scene.steps * particles / nearest(rows)
