@@ -192,7 +192,8 @@ def print_dry_run(plans: list, jobs: int, records: Path | None = None, chosen: s
         f"{threads} threads each: one thread's time / {speedup:.2f}, the speed-up measured at {measured_threads} "
         f"threads (benchmarks/results/threads.csv)" if measured_threads > 1 else
         f"{threads} threads each, priced as one: no speed-up measured at {threads} threads")
-    print(f"total: {runs}, {total:g} simulated hours; estimated wall time on this machine with {jobs} at a time "
+    at_once = max(1, min(jobs, len(all_secs)))         # no more at a time than there are runs to make
+    print(f"total: {runs}, {total:g} simulated hours; estimated wall time on this machine with {at_once} at a time "
           f"({each}): {duration(makespan(all_secs, jobs))} ({source}; taichimyxo/figures/plan.py)")
 
 
