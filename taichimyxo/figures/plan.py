@@ -257,7 +257,8 @@ def run_seconds(scene, rates: dict, measured: dict | None = None) -> float | Non
 
     def nearest(rows):
         dist = [abs(math.log(n / max(particles, 1))) for n, _ in rows]
-        return statistics.median(r for (_, r), d in zip(rows, dist) if d == min(dist))
+        best = min(dist)
+        return statistics.median(r for (_, r), d in zip(rows, dist) if d == best)
     rows = (measured or {}).get(_measured_kind(scene))
     if rows:
         return scene.steps * particles / nearest(rows)
