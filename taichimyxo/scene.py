@@ -17,6 +17,7 @@ from .catalogue import SCENES_DIR, available_scenes, resolve_path  # noqa: F401 
 
 # the schema (every key, its default and check) and its errors; re-exported: `from taichimyxo.scene import SCHEMA`
 from .schema import (  # noqa: F401
+    ADDED_KEYS,
     RANDOM_MAX_AREA_FRACTION,
     SCHEMA,
     STIFFNESS_NAMES,
@@ -138,6 +139,10 @@ class Scene:
         d = {k: (copy.deepcopy(v) if isinstance(v, dict) else v) for k, v in self.raw.items() if k not in exclude}
         if self.start != "aligned" and "population" in d:
             d["population"].pop("aligned_tilt_deg", None)
+        for dotted, before in ADDED_KEYS.items():
+            sec, key = dotted.split(".")
+            if sec in d and key in d[sec] and d[sec][key] == before:
+                del d[sec][key]
         return d
 
     def fingerprint(self, exclude=("output", "scene", "preview")) -> str:

@@ -115,6 +115,11 @@ SCHEMA: dict[str, dict[str, tuple]] = {
     },
 }
 
+# Keys added after runs were keyed by a hash of their scene's values (Scene.trajectory_values), each with the value
+# that reproduces the behaviour before it: at that value a key is left out of the hash, so every earlier run, sweep
+# point and checkpoint keeps its key. A key whose default later changes still hashes at every other value.
+ADDED_KEYS: dict[str, object] = {}
+
 # The densest random start placed reliably and in bounded time (placement.py, "Random sequential placement": above
 # 0.40 the tries per cell climb from hundreds to thousands, and past 0.44 placement stalls).
 RANDOM_MAX_AREA_FRACTION = 0.40
