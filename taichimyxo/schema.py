@@ -41,7 +41,9 @@ SCHEMA: dict[str, dict[str, tuple]] = {
                              "guiding never leave their lanes [decision, docs/model.md]"),
     },
     "cell": {
-        "length_um": (_F, 5.0, "pos", "outline length L including round caps, µm"),
+        "length_um": (_F, 5.0, "pos", "cell length L, µm, read as cell.length_reading says"),
+        "length_reading": (_S, "outline", ("outline", "chain"), "cell.length_um is the outline (the chain spans "
+                           "L - W, caps included in L) or the chain (the outline is L + W) [decision, docs/model.md]"),
         "width_um": (_F, 0.5, "pos", "cell width W, µm"),
         "particles": (_I, 8, ("range", 3, 64), "particles per cell N"),
         "k_s_N_per_m": (_F, 0.01, "pos", "linear spring stiffness k_s, N/m"),
@@ -60,6 +62,10 @@ SCHEMA: dict[str, dict[str, tuple]] = {
         "range_um": (_F, 0.25, "pos", "guiding range d_g (gap beyond W), µm"),
         "distance": (_S, "segments", ("segments", "particles"), "head-tail distance: between segments or particles"),
         "self": (_B, True, None, "a cell may follow its own tail"),
+        "pull_on": (_S, "head_particle", ("head_particle", "head_segment"), "where the follower's pull acts: its head "
+                    "particle, or shared equally by its head segment's two particles [decision, docs/model.md]"),
+        "reaction_on": (_S, "tail_particle", ("tail_particle", "tail_segment"), "adhesion: where the reaction acts "
+                        "on the leader: its tail particle, or shared by its tail segment's two particles [decision]"),
     },
     "slime": {
         "enabled": (_B, False, None, "long-range guiding by slime trails"),
@@ -72,6 +78,11 @@ SCHEMA: dict[str, dict[str, tuple]] = {
         "period_sd_fraction": (_F, 0.24, "nonneg", "SD of the period as a fraction of T_R"),
         "min_period_fraction": (_F, 0.1, "pos", "periods are truncated below this fraction of T_R"),
         "suppression": (_B, False, None, "skip reversals during head-to-tail interactions"),
+        "suppression_contacts": (_S, "head_or_tail", ("head_or_tail", "head"), "suppression: a cell's reversal is "
+                                 "held while its head follows a tail or its tail is followed (head_or_tail), or only "
+                                 "while its head follows (head) [decision, docs/model.md]"),
+        "suppressed_wait": (_S, "period", ("period", "contact_end"), "suppression: a held reversal waits a new period "
+                            "(its clock restarts) or only until the contact ends [decision, docs/model.md]"),
     },
     "run": {
         "hours": (_F, 6.0, "pos", "simulated time, h"),
@@ -118,7 +129,10 @@ SCHEMA: dict[str, dict[str, tuple]] = {
 # Keys added after runs were keyed by a hash of their scene's values (Scene.trajectory_values), each with the value
 # that reproduces the behaviour before it: at that value a key is left out of the hash, so every earlier run, sweep
 # point and checkpoint keeps its key. A key whose default later changes still hashes at every other value.
-ADDED_KEYS: dict[str, object] = {}
+ADDED_KEYS: dict[str, object] = {
+    "cell.length_reading": "outline", "guiding.pull_on": "head_particle", "guiding.reaction_on": "tail_particle",
+    "reversals.suppression_contacts": "head_or_tail", "reversals.suppressed_wait": "period",
+}
 
 # The densest random start placed reliably and in bounded time (placement.py, "Random sequential placement": above
 # 0.40 the tries per cell climb from hundreds to thousands, and past 0.44 placement stalls).

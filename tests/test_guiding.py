@@ -348,3 +348,79 @@ def test_overlap_counts_as_interaction_for_suppression(gap):
     flags = sim.model.head_to_tail.interacting.to_numpy().any(axis=1)   # per cell: head or tail end
     assert flags[1] != 0 and flags[0] != 0 and flags[2] == 0
     sim.close()
+
+
+# ---------------------------------------------------------------- decisions the paper leaves open (docs/decisions.md)
+@pytest.mark.parametrize("pull_on", ["head_particle", "head_segment"])
+def test_the_pull_acts_on_the_head_particle_or_is_shared_by_the_head_segment(pull_on):
+    """Straight cells in line at rest length, gap 0.2 µm: the only force beside the engine's equal shares is the pull
+    k_g g = 160 pN, all on the follower's head particle or half on each particle of its head segment."""
+    g = 0.2
+    sim = sim_with(in_line(g), guiding={"kind": "active", "pull_on": pull_on}, run={"precision": "f64"})
+    f = sim.forces()["total"][1, :, 0]                   # follower, x (the pull's direction)
+    extra = f - f[4]                                     # less the engine's share (particle 4 bears no pull)
+    pull = 800 * g
+    if pull_on == "head_particle":
+        assert extra[:2] == pytest.approx([pull, 0.0], abs=1e-6)
+    else:
+        assert extra[:2] == pytest.approx([pull / 2, pull / 2], abs=1e-6)
+    assert extra[2:] == pytest.approx(np.zeros(6), abs=1e-6)
+    assert extra.sum() == pytest.approx(pull, rel=1e-9)  # the cell's total is the same either way
+    sim.close()
+
+
+@pytest.mark.parametrize("reaction_on", ["tail_particle", "tail_segment"])
+def test_the_adhesion_reaction_acts_on_the_tail_particle_or_is_shared_by_the_tail_segment(reaction_on):
+    g = 0.2
+    sim = sim_with(in_line(g), guiding={"kind": "adhesion", "reaction_on": reaction_on}, run={"precision": "f64"})
+    f = sim.forces()["total"][0, :, 0]                   # leader: particle 7 is its tail
+    extra = f - f[3]
+    pull = 800 * g
+    if reaction_on == "tail_particle":
+        assert extra[6:] == pytest.approx([0.0, -pull], abs=1e-6)
+    else:
+        assert extra[6:] == pytest.approx([-pull / 2, -pull / 2], abs=1e-6)
+    assert extra[:6] == pytest.approx(np.zeros(6), abs=1e-6)
+    sim.close()
+
+
+@pytest.mark.parametrize("contacts", ["head_or_tail", "head"])
+def test_suppression_holds_both_cells_of_a_contact_or_only_the_follower(contacts):
+    pair = in_line(0.1, leader_x=10.0)
+    sim = sim_with(pair, box=(30.0, 30.0), guiding={"kind": "active"},
+                   reversals={"enabled": True, "period_min": 1.0 / 60, "suppression": True,
+                              "suppression_contacts": contacts})
+    flips = np.zeros(2, int)
+    prev = sim.engine_direction()
+    for _ in range(300):                          # 3 s, periods of about 1 s
+        sim.advance(10)
+        ke = sim.engine_direction()
+        flips += ke != prev
+        prev = ke
+        if contacts == "head" and flips[0]:
+            break                                 # the leader turned round: the pair has come apart
+    assert flips[1] == 0                          # the follower's head is in contact until the leader turns
+    if contacts == "head_or_tail":
+        assert flips[0] == 0
+    else:
+        assert flips[0] >= 1                      # the leader's tail is followed, yet it reverses
+    sim.close()
+
+
+@pytest.mark.parametrize("wait", ["period", "contact_end"])
+def test_a_held_reversal_waits_a_new_period_or_only_until_the_contact_ends(wait):
+    """A follower held in contact past its period (10 s periods, 12 s in contact); its leader is then taken away.
+    contact_end: the reversal, still due, fires at the next step; period: it waits for the clock's next turn."""
+    T_min = 10.0 / 60
+    sim = sim_with(in_line(0.1, leader_x=10.0), box=(40.0, 40.0), guiding={"kind": "active"},
+                   reversals={"enabled": True, "period_min": T_min, "period_sd_fraction": 0.0,
+                              "suppression": True, "suppressed_wait": wait}, run={"dt_ms": 2.0})
+    sim.advance(6000)                             # 12 s: at least one reversal of each cell held
+    assert (sim.engine_direction() == 1).all()
+    p = sim.positions()
+    p[0] += np.array([0.0, 15.0])                 # the leader moved 15 µm aside: no contact
+    sim.set_state(p, sim.engine_direction())
+    sim.advance(2)
+    flipped = sim.engine_direction()[1] == -1
+    assert flipped == (wait == "contact_end")
+    sim.close()

@@ -233,3 +233,16 @@ def test_dense_non_guided_rows_leave_their_lanes_only_from_a_tilted_start(small_
     across = sim.positions()[..., 1].mean(1) - tilted[0][..., 1].mean(1)
     across = np.abs(np.mod(across + 5.0, 10.0) - 5.0)                      # periodic: the nearer image
     assert across.max() > sc.width and across.mean() > 0.1                # cells left their rows
+
+
+def test_cell_length_read_as_the_chain_makes_the_outline_longer_by_one_width():
+    """cell.length_reading (docs/decisions.md): 5 µm as the outline is a chain of 4.5 µm; as the chain, an outline of
+    5.5 µm, so the random start's segments are 5/7 µm and the area fraction counts the longer outline."""
+    outline = Scene.from_dict({"domain": {"width_um": 60.0, "height_um": 60.0}})
+    chain = Scene.from_dict({"domain": {"width_um": 60.0, "height_um": 60.0}, "cell": {"length_reading": "chain"}})
+    assert outline.rest_length == pytest.approx(4.5 / 7) and chain.rest_length == pytest.approx(5.0 / 7)
+    assert chain.length == pytest.approx(5.5) and chain.area_fraction == pytest.approx(outline.area_fraction * 1.1)
+    pos, _ = initial_configuration(chain)
+    seg = np.linalg.norm(np.diff(pos, axis=1), axis=-1)
+    np.testing.assert_allclose(seg, 5.0 / 7, rtol=1e-12)
+    assert min_segment_distance_between_cells(pos, chain.box) >= chain.width

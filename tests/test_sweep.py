@@ -452,3 +452,51 @@ def test_ctrl_c_keeps_finished_runs_and_checkpoints_the_running_ones(tmp_path):
     assert json.loads((long_() / f"{name}.json").read_text())["status"] == "interrupted"
     rows = _csv(root)
     assert rows[short().name.rsplit("-", 1)[0]]["status"] == "completed" and rows[name]["status"] == "interrupted"
+
+
+def test_a_key_added_later_leaves_earlier_runs_keys_at_its_neutral_value():
+    """schema.ADDED_KEYS: at the value that reproduces the behaviour before it, a new key is not in the trajectory
+    hash (a run, a sweep point or a checkpoint made before it keeps its key); at any other value it is."""
+    from taichimyxo.schema import ADDED_KEYS, SCHEMA
+    from taichimyxo.sweep.spec import scene_key
+    base = Scene.load("S15")
+    for dotted, before in ADDED_KEYS.items():
+        sec, key = dotted.split(".")
+        assert key in SCHEMA[sec]
+        assert key not in base.trajectory_values()[sec]
+        other = next(v for v in SCHEMA[sec][key][2] if v != before)
+        changed = Scene.load("S15", {sec: {key: other}})
+        assert changed.trajectory_values()[sec][key] == other
+        assert scene_key(changed) != scene_key(base) and changed.fingerprint() != base.fingerprint()
+    stated: dict = {}
+    for dotted, before in ADDED_KEYS.items():
+        sec, key = dotted.split(".")
+        stated.setdefault(sec, {})[key] = before
+    assert scene_key(Scene.load("S15", stated)) == scene_key(base)         # stated at the neutral value: the same
+
+
+def test_grids_are_a_union_of_products_and_a_shared_point_runs_once(tmp_path, capsys):
+    """[[grid]] tables (sweeps/decisions.toml): each a product, the file's points their union; a point that resolves
+    to an earlier grid's scene (the default reading of each decision) is listed once, under its first name; sweep.csv
+    gives every run its resolved value of the keys its own grid does not sweep."""
+    from taichimyxo.sweep import load_sweep
+    from taichimyxo.sweep.collect import rows
+    f = tmp_path / "union.toml"
+    f.write_text('seeds = 2\nhours = 0.1\nbox_um = [20, 20]\n'
+                 '[[grid]]\nscene = ["S3"]\ncell.drag_ratio_normal = [0.5, 1.0]\nguiding.self = [true, false]\n'
+                 '[[grid]]\nscene = ["S3", "S4"]\nguiding.pull_on = ["head_particle", "head_segment"]\n')
+    sw = load_sweep(f)
+    pts = sw.points()
+    names = [p.name for p in pts]
+    # 4 x 2 seeds, then S3's head_particle points are the matrix's (0.5, true): 2 new S3 and 4 S4 points x 2 seeds
+    assert len(pts) == 8 + 2 + 4 and len({p.key for p in pts}) == len(pts)
+    assert "scene=S3_guiding.pull_on=head_particle_seed=1" not in names
+    assert "scene=S3_cell.drag_ratio_normal=0.5_guiding.self=true_seed=1" in names
+    assert "scene=S4_guiding.pull_on=head_particle_seed=2" in names
+    assert sw.swept_keys == ["scene", "cell.drag_ratio_normal", "guiding.self", "guiding.pull_on"]
+    row = next(r for r in rows(pts, tmp_path, sw.swept_keys) if r["name"] == "scene=S4_guiding.pull_on=head_segment_seed=1")
+    assert (row["cell.drag_ratio_normal"], row["guiding.self"], row["guiding.pull_on"]) == (0.5, True, "head_segment")
+    # within one grid a duplicate is still refused; grids must all name their scenes or none
+    f.write_text('seeds = 1\n[[grid]]\nscene = ["S3"]\n[[grid]]\ncell.k_a_N_m = [1e-17]\n')
+    assert main(["sweep", str(f), "--dry-run"]) == 2
+    assert "some grids name their scenes" in capsys.readouterr().err

@@ -81,7 +81,7 @@ def outcomes(analysis: dict) -> dict:
             "from_min": t_from, "to_min": float(t[-1]), "frames": len(t) - q0}
 
 
-def rows(points, root) -> list[dict]:
+def rows(points, root, swept_keys=None) -> list[dict]:
     """A row per point (a point without a result yet: status 'not run')."""
     out = []
     for p in points:
@@ -91,6 +91,10 @@ def rows(points, root) -> list[dict]:
         row = {"name": p.name, "run_dir": str(d.relative_to(root)), "status": r.get("status") or
                {"interrupted": "interrupted", "new": "not run"}.get(state(d), "not run")}
         row.update({k: v for k, v in p.overrides.items()})
+        for k in swept_keys or ():
+            if k not in p.overrides:                 # a key another [[grid]] sweeps: this run's resolved value
+                sec, _, key = k.partition(".")
+                row[k] = p.scene.raw.get(sec, {}).get(key, "")
         row.update(seed=p.seed, simulated_s=r.get("simulated_seconds"), wall_s=r.get("wall_seconds"),
                    steps=r.get("steps"), cells=r.get("cells"))
         row.update({k: oc.get(k) for k in OUTCOMES})
@@ -196,7 +200,7 @@ def collect(sweep, root, points=None) -> dict:
     """Write sweep.csv and the plots (module docstring) into root from the results of the sweep's points (given, or
     resolved again). Returns dict(csv, plots, rows)."""
     root = Path(root)
-    table = rows(sweep.points() if points is None else points, root)
+    table = rows(sweep.points() if points is None else points, root, sweep.swept_keys)
     csv_path = write_csv(table, root / "sweep.csv")
     plots = []
     done = [r for r in table if r["status"] == "completed"]

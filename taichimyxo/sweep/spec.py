@@ -64,31 +64,39 @@ class Sweep:
     outputs: dict
     executor_options: dict = field(default_factory=dict)      # executor name -> its table
     description: str = ""
+    grids: tuple = ()              # [[grid]] tables, each a product: their union (default: (grid,))
 
     @property
     def swept_keys(self) -> list[str]:
         return list(self.grid)
 
     def points(self) -> list[Point]:
-        """Every combination of the grid's values with every seed, resolved and validated (SweepError at the first
+        """Every combination of each grid's values with every seed, resolved and validated (SweepError at the first
         bad point). Points differing in a value are different runs even where the scene's fingerprint would not
-        tell them apart (a duplicate combination is refused)."""
-        bases = {name: self._base_scene(name) for name in self.grid.get("scene", [self.base])}
+        tell them apart (a duplicate combination within a grid is refused); a point of a later [[grid]] that
+        resolves to the scene of an earlier one is that run, listed once (each decision's default, say)."""
         out, seen = [], {}
-        combos = itertools.product(*self.grid.values()) if self.grid else [()]
-        for values in combos:
-            over = dict(zip(self.grid, values))
-            base_name = over.get("scene", self.base)
-            base = bases[base_name]
-            sized = self._sized(base)
-            for seed in self.seeds:
-                name = point_name(over, seed)
-                scene = self._resolve(base_name, sized, over, seed, name)
-                p = Point(name=name, overrides=over, seed=seed, scene=scene)
-                if p.key in seen:
-                    raise SweepError(f"{self.path}: point {name} resolves to the same scene as {seen[p.key]}")
-                seen[p.key] = name
-                out.append(p)
+        bases: dict = {}
+        for grid in self.grids or (self.grid,):
+            mine: set = set()
+            combos = itertools.product(*grid.values()) if grid else [()]
+            for values in combos:
+                over = dict(zip(grid, values))
+                base_name = over.get("scene", self.base)
+                if base_name not in bases:
+                    bases[base_name] = self._base_scene(base_name)
+                sized = self._sized(bases[base_name])
+                for seed in self.seeds:
+                    name = point_name(over, seed)
+                    scene = self._resolve(base_name, sized, over, seed, name)
+                    p = Point(name=name, overrides=over, seed=seed, scene=scene)
+                    if p.key in mine:
+                        raise SweepError(f"{self.path}: point {name} resolves to the same scene as {seen[p.key]}")
+                    mine.add(p.key)
+                    if p.key in seen:
+                        continue
+                    seen[p.key] = name
+                    out.append(p)
         return out
 
     # ---- resolving a point
@@ -261,32 +269,49 @@ def load_sweep(path) -> Sweep:
     except tomllib.TOMLDecodeError as e:
         raise SweepError(f"{path}: malformed TOML: {e}") from None
     for k, v in data.items():
-        if k in TABLES or k in EXECUTOR_TABLES:
+        if k == "grid" and isinstance(v, list):
+            if not v or not all(isinstance(g, dict) for g in v):
+                raise SweepError(f"{path}: [[grid]] must be one or more tables")
+        elif k in TABLES or k in EXECUTOR_TABLES:
             if not isinstance(v, dict):
                 raise SweepError(f"{path}: [{k}] must be a table")
         elif k not in TOP_KEYS:
             raise SweepError(f"{path}: unknown key {k!r}; allowed: {', '.join(TOP_KEYS)} and the tables "
                              f"[{'], ['.join(TABLES + EXECUTOR_TABLES)}]")
-    grid = _flatten(data.get("grid", {}), "grid", path)
-    if "scene" in grid:
-        scenes = grid["scene"]
-        if not isinstance(scenes, list) or not scenes or not all(isinstance(x, str) for x in scenes):
-            raise SweepError(f"{path}: [grid] scene = {toml_value(scenes)}: expected a list of scene names, e.g. "
-                             f"[\"S1\", \"S3\"]")
-        grid["scene"] = [_scene_path(x, path) for x in scenes]
-        if "scene" in data:
-            raise SweepError(f"{path}: scene and [grid] scene both given; keep one")
-        data = {**data, "scene": grid["scene"][0]}
+    tables = data.get("grid", {})
+    grids = [_flatten(t, "grid", path) for t in (tables if isinstance(tables, list) else [tables])]
+    for grid in grids:
+        if "scene" in grid:
+            scenes = grid["scene"]
+            if not isinstance(scenes, list) or not scenes or not all(isinstance(x, str) for x in scenes):
+                raise SweepError(f"{path}: [grid] scene = {toml_value(scenes)}: expected a list of scene names, e.g. "
+                                 f"[\"S1\", \"S3\"]")
+            grid["scene"] = [_scene_path(x, path) for x in scenes]
+            if "scene" in data:
+                raise SweepError(f"{path}: scene and [grid] scene both given; keep one")
+    named = [g for g in grids if "scene" in g]
+    if named:
+        if len(named) < len(grids):
+            raise SweepError(f"{path}: [[grid]]: some grids name their scenes and some do not; give each its "
+                             f"scene = [...]")
+        data = {**data, "scene": named[0]["scene"][0]}
     if "scene" not in data or not isinstance(data["scene"], str):
         raise SweepError(f"{path}: scene: name the base scene, e.g. scene = \"S1\" (a name as `list` shows it, or "
                          f"a .toml path relative to the sweep file), or several in [grid] scene = [...]")
     base = _scene_path(data["scene"], path)
-    for key, vals in grid.items():
-        if not isinstance(vals, list):
-            raise SweepError(f"{path}: [grid] {key} = {toml_value(vals)}: expected a list of values (a fixed value "
-                             f"goes in [set])")
-        if not vals:
-            raise SweepError(f"{path}: [grid] {key} = []: an empty list gives no points; give at least one value")
+    for grid in grids:
+        for key, vals in grid.items():
+            if not isinstance(vals, list):
+                raise SweepError(f"{path}: [grid] {key} = {toml_value(vals)}: expected a list of values (a fixed "
+                                 f"value goes in [set])")
+            if not vals:
+                raise SweepError(f"{path}: [grid] {key} = []: an empty list gives no points; give at least one "
+                                 f"value")
+    grid: dict = {}                 # every swept key with every value it takes, in the order the file gives them
+    for g in grids:
+        for key, vals in g.items():
+            grid.setdefault(key, [])
+            grid[key] += [v for v in vals if v not in grid[key]]
     fixed = _flatten(data.get("set", {}), "set", path)
     for key in set(grid) & set(fixed):
         raise SweepError(f"{path}: {key} is both in [grid] and in [set]")
@@ -312,7 +337,7 @@ def load_sweep(path) -> Sweep:
     if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9._+-]+", name):
         raise SweepError(f"{path}: name = {name!r}: letters, digits and . _ + - only (it names files)")
     seeds_of = {}
-    for b in grid.get("scene", [base]):
+    for b in {b: None for g in grids for b in g.get("scene", [base])}:
         try:
             seeds_of[b] = Scene.load(b).seed
         except SceneError as e:
@@ -321,4 +346,4 @@ def load_sweep(path) -> Sweep:
     return Sweep(path=path, name=name, base=base, grid=grid, fixed=fixed, seeds=_seeds(data, path, base_seed),
                  hours=hours, scale=scale, box_um=box, force=force, outputs=_outputs(data.get("outputs", {}), path),
                  executor_options={k: dict(data[k]) for k in EXECUTOR_TABLES if k in data},
-                 description=str(data.get("description", "")))
+                 description=str(data.get("description", "")), grids=tuple(grids) if len(grids) > 1 else ())

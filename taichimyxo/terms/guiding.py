@@ -27,6 +27,9 @@ class HeadToTail(Term):
         self.k_g, self.f_max, self.d_g = scene.k_g, scene.guiding_f_max, scene.guiding_range
         self.particles = scene.guiding_by_particles
         self.guide_self = scene.guiding_self
+        self.pull_shared = scene.guiding_pull_shared              # docs/model.md "Head-to-tail guiding"
+        self.reaction_shared = scene.adhesion_reaction_shared
+        self.head_only = scene.suppression_head_only
         C = state.n_cells
         self.g_head = state.vec(builder, C, state.fdt) if self.kind != "none" else None
         self.g_tail = state.vec(builder, C, state.fdt) if self.kind == "adhesion" else None
@@ -120,14 +123,19 @@ class HeadToTail(Term):
 
     @ti.func
     def interacts(self, c):
-        """Cell c's head or tail is in a head-to-tail interaction (gap below d_g, overlap included)."""
+        """Cell c's head or tail is in a head-to-tail interaction (gap below d_g, overlap included); with
+        reversals.suppression_contacts = "head", only its head (the follower's end)."""
         v = self.interacting[c]
-        return v[0] != 0 or v[1] != 0
+        out = v[0] != 0 or v[1] != 0
+        if ti.static(self.head_only):
+            out = v[0 if self.state.ke[c] > 0 else 1] != 0      # the head segment's end (State.head_seg)
+        return out
 
     @ti.func
     def add_cell_forces(self, c, T, F):
         """The gathered pull on cell c's head (passive: its component normal to the head's direction) and, with
-        adhesion, the reaction on its tail."""
+        adhesion, the reaction on its tail: each on the end particle, or shared by the end segment's two particles
+        (guiding.pull_on, guiding.reaction_on)."""
         if ti.static(self.kind != "none"):
             st = self.state
             N = ti.static(self.N)
@@ -137,10 +145,24 @@ class HeadToTail(Term):
             if ti.static(self.kind == "passive"):
                 nh = perp(ti.Vector([T[head, 0], T[head, 1]]))
                 g = g.dot(nh) * nh
-            F[head, 0] += g[0]
-            F[head, 1] += g[1]
+            if ti.static(self.pull_shared):
+                head2 = 1 if head == 0 else N - 2
+                F[head, 0] += 0.5 * g[0]
+                F[head, 1] += 0.5 * g[1]
+                F[head2, 0] += 0.5 * g[0]
+                F[head2, 1] += 0.5 * g[1]
+            else:
+                F[head, 0] += g[0]
+                F[head, 1] += g[1]
             if ti.static(self.kind == "adhesion"):
                 gt = self.g_tail[c]
-                F[tail, 0] += gt[0]
-                F[tail, 1] += gt[1]
+                if ti.static(self.reaction_shared):
+                    tail2 = 1 if tail == 0 else N - 2
+                    F[tail, 0] += 0.5 * gt[0]
+                    F[tail, 1] += 0.5 * gt[1]
+                    F[tail2, 0] += 0.5 * gt[0]
+                    F[tail2, 1] += 0.5 * gt[1]
+                else:
+                    F[tail, 0] += gt[0]
+                    F[tail, 1] += gt[1]
         return F

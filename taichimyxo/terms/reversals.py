@@ -1,7 +1,8 @@
 """Term 7, reversals (docs/model.md "Force terms"): each cell reverses its engine direction (k_e -> -k_e) when its
 clock reaches its period; periods ~ Normal(T_R, sd) truncated below, initial phases uniform, drawn from a
 counter-based random stream (taichimyxo/rng.py), so runs are reproducible on any number of threads. With
-suppression, a cell in a head-to-tail interaction this step does not reverse; its clock restarts. Clocks are
+suppression, a cell in a head-to-tail interaction this step does not reverse; its clock restarts (or, with
+reversals.suppressed_wait = "contact_end", the reversal stays due and fires at its first step out of contact). Clocks are
 integers (scene steps, run.dt_ms): exact over hours. A step of another length (run.step_control = "error" takes
 whole multiples of the scene's step) advances them by its length in scene steps, rounded, at least one. A
 rollback's redo splits each scene step into shorter ones; the clock is held on all but the last of them, so it
@@ -31,6 +32,7 @@ class Reversals(Term):
         self.period_min_steps = max(1.0, T * scene.reversal_min_fraction)
         self.head_tail = head_tail if scene.suppression else None
         self.suppressed = self.head_tail is not None
+        self.until_contact_end = self.suppressed and scene.suppression_until_contact_end
         C = state.n_cells
         self.rev_clock = state.scalar(builder, C, ti.i32)      # steps since the last reversal
         self.rev_period = state.scalar(builder, C, ti.i32)     # this cycle's period, steps
@@ -61,6 +63,7 @@ class Reversals(Term):
     def after_move(self, c, dt):
         """Advance cell c's clock by a step of dt s; reverse when it reaches the period, unless suppressed."""
         st = self.state
+        due_before = self.rev_clock[c] >= self.rev_period[c]     # held since an earlier step (contact_end)
         if self.clock_held[0] == 0:
             self.rev_clock[c] += ti.max(1, ti.cast(ti.round(dt / self.dt0), ti.i32))
         if self.rev_clock[c] >= self.rev_period[c]:
@@ -70,8 +73,11 @@ class Reversals(Term):
             skip = False
             if ti.static(self.suppressed):
                 skip = self.head_tail.interacts(c)
-                if skip:
+                if skip and not due_before:
                     self.rev_suppressed[c] += 1
+                if ti.static(self.until_contact_end):
+                    if skip:
+                        self.rev_clock[c] = self.rev_period[c]      # still due: tried again next step
             if not skip:
                 st.ke[c] = -st.ke[c]
                 self.rev_count[c] += 1
