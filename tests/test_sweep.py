@@ -494,7 +494,8 @@ def test_grids_are_a_union_of_products_and_a_shared_point_runs_once(tmp_path, ca
     assert "scene=S3_cell.drag_ratio_normal=0.5_guiding.self=true_seed=1" in names
     assert "scene=S4_guiding.pull_on=head_particle_seed=2" in names
     assert sw.swept_keys == ["scene", "cell.drag_ratio_normal", "guiding.self", "guiding.pull_on"]
-    row = next(r for r in rows(pts, tmp_path, sw.swept_keys) if r["name"] == "scene=S4_guiding.pull_on=head_segment_seed=1")
+    row = next(r for r in rows(pts, tmp_path, sw.swept_keys)
+               if r["name"] == "scene=S4_guiding.pull_on=head_segment_seed=1")
     assert (row["cell.drag_ratio_normal"], row["guiding.self"], row["guiding.pull_on"]) == (0.5, True, "head_segment")
     # within one grid a duplicate is still refused; grids must all name their scenes or none
     f.write_text('seeds = 1\n[[grid]]\nscene = ["S3"]\n[[grid]]\ncell.k_a_N_m = [1e-17]\n')

@@ -2,9 +2,9 @@
 clock reaches its period; periods ~ Normal(T_R, sd) truncated below, initial phases uniform, drawn from a
 counter-based random stream (taichimyxo/rng.py), so runs are reproducible on any number of threads. With
 suppression, a cell in a head-to-tail interaction this step does not reverse; its clock restarts (or, with
-reversals.suppressed_wait = "contact_end", the reversal stays due and fires at its first step out of contact). Clocks are
-integers (scene steps, run.dt_ms): exact over hours. A step of another length (run.step_control = "error" takes
-whole multiples of the scene's step) advances them by its length in scene steps, rounded, at least one. A
+reversals.suppressed_wait = "contact_end", the reversal stays due and fires at its first step out of contact).
+Clocks are integers (scene steps, run.dt_ms): exact over hours. A step of another length (run.step_control =
+"error" takes whole multiples of the scene's step) advances them by its length in scene steps, rounded, at least one. A
 rollback's redo splits each scene step into shorter ones; the clock is held on all but the last of them, so it
 still counts scene steps (hold_clock)."""
 
