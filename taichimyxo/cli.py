@@ -1,4 +1,4 @@
-"""Command line: python -m taichimyxo {list, keys, scene, render, analyze, claims, videos, sweep, bench}.
+"""Command line: python -m taichimyxo {list, keys, scene, render, analyze, claims, decisions, videos, sweep, bench}.
 
 Bad input is one line on stderr naming the problem and a non-zero exit (2), before any simulation starts.
 Exit status: 0 done, 2 bad input, 3 a run stopped because its state broke a numerical invariant, 130 interrupted;
@@ -114,6 +114,12 @@ def _build_parser() -> argparse.ArgumentParser:
     c.add_argument("--every", type=positive_int, default=1, help="analyse every K-th frame")
     c.add_argument("--v-b", type=float, default=None, help="free-cell speed, µm/min (default: each run's scene)")
     c.add_argument("--no-plots", action="store_true", help="the tables only")
+
+    d = sub.add_parser("decisions", help="the decision study's table from decision sweeps' results (decision x "
+                       "claim, mean ± SD over seeds; docs/decisions.md)")
+    d.add_argument("folders", nargs="+", metavar="DIR", help="a decision sweep's --out folder (sweeps/decisions.toml, "
+                   "sweeps/decisions_dense.toml)")
+    d.add_argument("--out", default=".", help="folder for decisions.md/.csv/.json (default: current folder)")
 
     v = sub.add_parser("videos", help="regenerate the supplementary videos S1-S17")
     v.add_argument("--preview", action="store_true")
@@ -303,6 +309,17 @@ def cmd_claims(args) -> int:
     return 0
 
 
+def cmd_decisions(args) -> int:
+    from .analysis.decisions import write_decisions
+    try:
+        res = write_decisions(args.folders, args.out)
+    except FileNotFoundError as e:
+        raise SceneError(str(e)) from None
+    print(open(os.path.join(res["out"], "decisions.md")).read(), end="")
+    print(f"{res['runs']} finished runs; table in {res['out']}/decisions.md, .csv, .json")
+    return 0
+
+
 def cmd_videos(args) -> int:
     from .videos import regenerate
     jobs = args.jobs or (1 if args.executor == "local" else 0)     # 0: the executor's default
@@ -361,6 +378,8 @@ def main(argv: list[str] | None = None) -> int:
             return cmd_claims(args)
         if args.cmd == "videos":
             return cmd_videos(args)
+        if args.cmd == "decisions":
+            return cmd_decisions(args)
         if args.cmd == "sweep":
             return cmd_sweep(args)
         if args.cmd == "bench":

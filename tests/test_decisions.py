@@ -1,0 +1,56 @@
+"""The decision study's table (taichimyxo/analysis/decisions.py) on run folders whose measures are known."""
+import json
+
+import pytest
+
+from taichimyxo.analysis.decisions import read_runs, readings, rigid_fraction, to_markdown
+from taichimyxo.cli import main
+from taichimyxo.scene import Scene, to_toml
+
+
+def _run(root, name, scene, over, seed, edge, in_agg, tracks=()):
+    d = root / "runs" / name
+    d.mkdir(parents=True)
+    nested = {}
+    for k, v in over.items():
+        sec, key = k.split(".")
+        nested.setdefault(sec, {})[key] = v
+    (d / "scene.toml").write_text(to_toml(Scene.load(scene, nested)))
+    (d / "point.json").write_text(json.dumps({"overrides": {"scene": scene, **over}, "seed": seed}))
+    analysis = {"meta": {"n_cells": 100}, "timeseries": {"time_min": [1.0, 2.0, 3.0, 4.0]}, "tracks": list(tracks)}
+    (d / "a.analysis.json").write_text(json.dumps(analysis))
+    (d / "result.json").write_text(json.dumps({"status": "completed", "seed": seed, "analysis": "a.analysis.json",
+                                               "outcomes": {"edge_speed_vb": edge, "fraction_in_aggregates": in_agg}}))
+
+
+def test_readings_sort_runs_by_their_resolved_values_and_give_mean_and_sd_over_seeds(tmp_path, capsys):
+    for s, e in [(1, 0.6), (2, 0.8)]:
+        _run(tmp_path, f"d{s}", "S4", {}, s, e, 0.5)                                   # the default reading
+        _run(tmp_path, f"n{s}", "S4", {"guiding.self": False}, s, e + 0.4, 0.6)        # self-following off
+        _run(tmp_path, f"r{s}", "S4", {"cell.drag_ratio_normal": 2.0}, s, 1.3, 0.7)    # drag ratio 2
+        _run(tmp_path, f"m{s}", "S4", {"cell.drag_ratio_normal": 2.0, "guiding.self": False}, s, 1.4, 0.7)
+    _run(tmp_path, "unfinished", "S4", {"guiding.pull_on": "head_segment"}, 1, 9.0, 0.9)
+    (tmp_path / "runs" / "unfinished" / "result.json").write_text('{"status": "interrupted"}')
+    runs = read_runs([tmp_path])
+    assert len(runs) == 8
+    rows = {r["reading"]: r for r in readings(runs)}
+    d = rows["default"]["cells"]["S4 edge"]
+    assert (d["mean"], d["n"]) == (pytest.approx(0.7), 2) and d["sd"] == pytest.approx(0.1414, abs=1e-3)
+    assert rows["self-following = false"]["cells"]["S4 edge"]["mean"] == pytest.approx(1.1)
+    assert rows["ζ_n / ζ_t = 2"]["cells"]["S4 edge"]["mean"] == pytest.approx(1.3)      # self at its default
+    assert rows["ζ_n / ζ_t = 2, self-following = false"]["cells"]["S4 edge"]["mean"] == pytest.approx(1.4)
+    assert not any("pull acts on" in k for k in rows)                                   # not finished: no row
+    assert rows["default"]["cells"]["S3 edge"] is None
+    md = to_markdown(list(rows.values()))
+    assert "| default | 0.70 ± 0.14 (2) | 0.50 ± 0.00 (2) |" in md
+    assert "**1.30 ± 0.00 (2)**" in md                                                  # 0.6 from the default
+    assert main(["decisions", str(tmp_path), "--out", str(tmp_path / "t")]) == 0
+    assert (tmp_path / "t" / "decisions.csv").read_text().count("S4 edge") == 4
+
+
+def test_rigid_fraction_counts_cells_of_rigidly_rotating_aggregates_over_the_last_quarter():
+    tracks = [{"series": {"time_min": [3.0, 4.0], "n_cells": [10, 20], "rigidity_exponent": [0.9, 1.0]}},
+              {"series": {"time_min": [4.0], "n_cells": [30], "rigidity_exponent": [0.1]}},       # cells at v_b
+              {"series": {"time_min": [1.0], "n_cells": [50], "rigidity_exponent": [1.0]}}]       # too early
+    a = {"meta": {"n_cells": 100}, "timeseries": {"time_min": [1.0, 2.0, 3.0, 4.0]}, "tracks": tracks}
+    assert rigid_fraction(a) == pytest.approx(0.2)                # the last quarter is t = 4: 20 of 100 cells
