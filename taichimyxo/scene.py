@@ -178,9 +178,8 @@ class Scene:
 
     @property
     def length(self) -> float:
-        """The outline length L, caps included: cell.length_um, or cell.length_um + W where it names the chain."""
-        L = self.raw["cell"]["length_um"]
-        return L if self.raw["cell"]["length_reading"] == "outline" else L + self.width
+        """The outline L, caps included (cell.length_um, + W where cell.length_reading names the chain)."""
+        return self.raw["cell"]["length_um"] + (0.0 if self.raw["cell"]["length_reading"] == "outline" else self.width)
 
     @property
     def width(self) -> float:
@@ -290,24 +289,21 @@ class Scene:
     def guiding_self(self) -> bool:
         return self.raw["guiding"]["self"]
 
+    # the readings the decision study compares (docs/decisions.md), as the terms ask for them
     @property
     def guiding_pull_shared(self) -> bool:
-        """The follower's pull is shared by its head segment's two particles (else on the head particle)."""
         return self.raw["guiding"]["pull_on"] == "head_segment"
 
     @property
     def adhesion_reaction_shared(self) -> bool:
-        """The adhesion reaction is shared by the leader's tail segment's two particles (else on its tail particle)."""
         return self.raw["guiding"]["reaction_on"] == "tail_segment"
 
     @property
     def suppression_head_only(self) -> bool:
-        """Only the follower's head holds its reversal (else either end in a head-to-tail interaction)."""
         return self.raw["reversals"]["suppression_contacts"] == "head"
 
     @property
     def suppression_until_contact_end(self) -> bool:
-        """A held reversal fires once the contact ends (else it waits a new period)."""
         return self.raw["reversals"]["suppressed_wait"] == "contact_end"
 
     @property

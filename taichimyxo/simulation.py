@@ -34,6 +34,26 @@ from .scene import SceneError
 from .state import Layout, State, list_capacities
 
 
+# arguments of the other starts, and the imex integrator's options (integrators/imex.py)
+OTHER_STARTS = {"positions": "Simulation.from_positions(scene, positions, engine_direction)",
+                "engine_direction": "Simulation.from_positions(scene, positions, engine_direction)",
+                "checkpoint": "Simulation.from_checkpoint(scene, checkpoint)"}
+IMEX_OPTIONS = ("contacts", "tol", "max_iter", "iters_per_launch")
+
+
+def check_options(scene, options: dict) -> None:
+    """A misplaced argument names the call that takes it (TypeError, one sentence)."""
+    for k in options:
+        if k in OTHER_STARTS:
+            raise TypeError(f"Simulation(scene, {k}=...): a start from given cells is {OTHER_STARTS[k]}")
+        if k not in IMEX_OPTIONS:
+            raise TypeError(f"Simulation(scene, {k}=...): unknown option; Simulation takes arch, threads, loop_shape "
+                            f"and, with run.integrator = 'imex', {', '.join(IMEX_OPTIONS)}")
+    if options and scene.integrator not in ("imex", "imex-explicit"):
+        raise TypeError(f"Simulation(scene, {sorted(options)[0]}=...): an option of run.integrator = 'imex'; this "
+                        f"scene's integrator is {scene.integrator!r} (set run.integrator = 'imex' to use it)")
+
+
 class Simulation:
     def __init__(self, scene, *, arch: str | None = None, threads: int | None = None, loop_shape: str | None = None,
                  _start: tuple | None = None, **integrator_options):
@@ -43,6 +63,7 @@ class Simulation:
         loop_shape: "cpu" or "gpu" forces how the kernels launch their loops (taichimyxo/launch.py; default: the
         arch's). integrator_options go to the integrator (imex: contacts = coupled | diagonal | explicit, tol,
         max_iter). Other starts: from_positions, from_checkpoint."""
+        check_options(scene, integrator_options)
         integrator_options = imex_options(scene, integrator_options)      # refused before any field is made
         positions, engine_direction = _start if _start is not None else initial_state(scene)
         self.arch = init_backend(scene, arch, threads)

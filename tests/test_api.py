@@ -153,3 +153,18 @@ def test_checkpoint_and_summary_writers(ti_cpu, tmp_path, small_scene):
         assert tm.run(sim, steps=10, writers=[Checkpoint(ck)]).completed and not ck.exists()
     finally:
         sim.close()
+
+
+def test_a_misplaced_argument_to_simulation_names_the_call_that_takes_it():
+    """Refused before Taichi starts, in one sentence naming the argument and the call or value to use."""
+    from taichimyxo.scene import Scene
+    from taichimyxo.simulation import Simulation
+    sc = Scene.load("S1")
+    with pytest.raises(TypeError, match=r"positions=.*Simulation\.from_positions\(scene, positions, engine_dir"):
+        Simulation(sc, positions=np.zeros((1, 8, 2)), engine_direction=np.ones(1))
+    with pytest.raises(TypeError, match=r"checkpoint=.*Simulation\.from_checkpoint"):
+        Simulation(sc, checkpoint="run.ckpt")
+    with pytest.raises(TypeError, match=r"tolerance=.*unknown option.*contacts, tol, max_iter"):
+        Simulation(sc, tolerance=1e-6)
+    with pytest.raises(TypeError, match=r"contacts=.*run.integrator = 'imex'.*'explicit'"):
+        Simulation(sc, contacts="coupled")

@@ -37,8 +37,7 @@ def _imports(mods: dict) -> tuple[dict, list]:
             elif isinstance(node, ast.Import):
                 deps.update(a.name for a in node.names if a.name in mods)
         deps.discard(name)
-        # a package's __init__ re-exporting its own submodules is not a dependency cycle
-        graph[name] = {d for d in deps if not (f.name == "__init__.py" and d.startswith(name + "."))}
+        graph[name] = deps
     return graph, private
 
 

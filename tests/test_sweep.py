@@ -268,13 +268,15 @@ def test_a_niced_sweep_starts_its_runs_at_its_own_niceness():
     import subprocess
     import sys
     code = ("import os, subprocess; from pathlib import Path; from taichimyxo.sweep.local import keep_priority\n"
-            "os.nice(7)\n"
+            "mine = os.nice(7)\n"
             "p = subprocess.Popen(['sleep', '30'], start_new_session=True)\n"
             "keep_priority(p.pid)\n"
-            "print(Path(f'/proc/{p.pid}/autogroup').read_text().split()[-1]); p.kill()\n")
+            "print(mine, Path(f'/proc/{p.pid}/autogroup').read_text().split()[-1]); p.kill()\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
-    assert out.stdout.split() == ["7"]
+    mine, group = out.stdout.split()
+    # 7 above whatever niceness the suite runs at (capped at 19 by the kernel): the sweep's own, not 0
+    assert group == mine and int(mine) == min(19, os.nice(0) + 7)
 
 
 def test_local_executor_keeps_jobs_runs_going(tmp_path, monkeypatch):

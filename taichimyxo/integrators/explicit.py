@@ -9,7 +9,7 @@ import taichi as ti
 from ..kernel_call import direct
 from ..neighbours import FLAG_MOVED
 from ..state import perp
-from . import step_code
+from .codes import step_code
 from .step_control import StepControl
 
 

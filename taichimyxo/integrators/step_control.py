@@ -26,7 +26,7 @@ import math
 
 import taichi as ti
 
-from . import error_ratio_code, needs_rebuild
+from .codes import error_ratio_code, needs_rebuild
 
 # the quantum of the returned error ratio, and its cap (so that flag + 2 q fits an i32)
 RATIO_SCALE = 1000
