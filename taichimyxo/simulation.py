@@ -33,7 +33,6 @@ from .neighbours import NeighbourList, NeighbourOverflow  # noqa: F401  (Neighbo
 from .scene import SceneError
 from .state import Layout, State, list_capacities
 
-
 # arguments of the other starts, and the imex integrator's options (integrators/imex.py)
 OTHER_STARTS = {"positions": "Simulation.from_positions(scene, positions, engine_direction)",
                 "engine_direction": "Simulation.from_positions(scene, positions, engine_direction)",
