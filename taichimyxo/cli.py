@@ -243,6 +243,13 @@ def cmd_scene(args) -> int:
         print(f"taichimyxo: {sc.name} interrupted at {duration(summary['simulated_seconds'])} simulated; files closed, "
               f"checkpoint {summary['files'].get('checkpoint')}; continue with --resume", file=sys.stderr)
         return EXIT_INTERRUPTED
+    if summary.get("status") == "no_space":
+        ck = summary["files"].get("checkpoint")
+        print(f"taichimyxo: error: {sc.name} stopped at t = {duration(summary['simulated_seconds'])}: "
+              f"{summary['invariant_broken']}; the files in {args.out} keep what was written; free space there and "
+              + (f"continue with --resume (from {ck})" if ck and os.path.isfile(os.path.join(args.out, ck)) else
+                 "start it again with --overwrite (no checkpoint was written yet)"), file=sys.stderr)
+        return EXIT_RUN_FAILED
     if summary.get("status") == "failed":
         print(f"taichimyxo: error: {sc.name} stopped at step {summary['steps']} "
               f"(t = {duration(summary['simulated_seconds'])}): {summary['invariant_broken']}; the trajectory "

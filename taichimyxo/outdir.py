@@ -136,3 +136,20 @@ def remove_run(files: dict) -> None:
     """Remove what an earlier run of the scene wrote (--overwrite), so nothing of it is mistaken for the new one's."""
     for p in files.values():
         Path(p).unlink(missing_ok=True)
+
+
+def lock_run(out: Path, name: str):
+    """Hold `out`/.NAME.lock for the run of scene NAME (an open file; closing it, or the process ending however it
+    ends, releases it): a second run of the same scene into the same folder at the same time is refused (OutputError)
+    before it reads or writes anything there. A file system without locks runs unguarded."""
+    import fcntl
+    f = open(Path(out) / f".{name}.lock", "a")        # noqa: SIM115 - held open for the run's lifetime
+    try:
+        fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        f.close()
+        raise OutputError(f"{out} is being written by another run of {name} now; wait for it to end, or give "
+                          f"another --out") from None
+    except OSError:
+        pass
+    return f

@@ -24,6 +24,7 @@
 """
 from __future__ import annotations
 
+import errno
 import signal
 import time
 
@@ -65,6 +66,14 @@ class Interrupt:
     def __exit__(self, *exc):
         for s, h in self._old.items():
             signal.signal(s, h)
+
+
+# a write that failed for want of space (a full disk, a quota, a file-size limit): the run stops, keeping what it wrote
+NO_SPACE = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
+
+
+def no_space(e: BaseException) -> bool:
+    return isinstance(e, OSError) and e.errno in NO_SPACE
 
 
 class Run:
@@ -253,12 +262,23 @@ def drive(sim, n_steps: int, writers=(), *, chunk_steps: int = 2000, speed_windo
     except (InvariantBroken, NeighbourOverflow) as e:
         # NeighbourOverflow: more neighbours than the list holds, which a blown-up state produces
         run.status, run.broken = "failed", str(e)
+    except OSError as e:
+        if not no_space(e):
+            raise
+        # the files keep what was written before; --resume continues from the last checkpoint (scene_run.py)
+        run.status, run.broken = "no_space", f"{e.strerror} writing {e.filename or 'an output file'}"
     finally:
         if close:
-            close_writers(writers)
+            close_writers(writers, tolerate=no_space if run.status == "no_space" else None)
     run.wall_seconds = time.perf_counter() - wall0
     for w in writers:
-        w.finish(run)
+        try:
+            w.finish(run)
+        except OSError as e:
+            if not no_space(e):
+                raise
+            run.status = "no_space"
+            run.broken = run.broken or f"{e.strerror} writing {e.filename or 'an output file'}"
     return run
 
 
@@ -272,13 +292,16 @@ class _NoInterrupt:
         pass
 
 
-def close_writers(writers) -> None:
-    """Close every writer, even when one of them fails to close (the first error is raised after)."""
+def close_writers(writers, tolerate=None) -> None:
+    """Close every writer, even when one of them fails to close (the first error is raised after, unless
+    `tolerate(error)` says it is one the run already stopped for)."""
     err = None
     for w in writers:
         try:
             w.close()
         except BaseException as e:      # noqa: BLE001 - re-raised below, after the others are closed
+            if tolerate is not None and tolerate(e):
+                continue
             err = err or e
     if err is not None:
         raise err

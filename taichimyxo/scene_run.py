@@ -22,7 +22,7 @@ import time
 from pathlib import Path
 
 from .event_log import EventLog
-from .outdir import OutputError, check_out_folder, outputs, plan_run, read_summary, remove_run  # noqa: F401
+from .outdir import OutputError, check_out_folder, lock_run, outputs, plan_run, read_summary, remove_run  # noqa: F401
 from .run_loop import drive
 from .scene import Scene, SceneError
 from .status_line import duration
@@ -104,7 +104,10 @@ def run_scene(scene: Scene, out_dir: str = "videos", arch: str = "cpu", resume: 
     replaced only with overwrite; a finished one of the same scene is returned as it is, with "already_complete".
     stop_after_steps (tests): behave as if interrupted after that many steps.
     rollback: a chunk that breaks an invariant is redone at split steps (taichimyxo/run_loop.py); a run that breaks one
-    at every split, or at once without rollback, returns with status "failed" (files closed, checkpoint written)."""
+    at every split, or at once without rollback, returns with status "failed" (files closed, checkpoint written).
+    Two runs of one scene into one folder at once: the second is refused (outdir.lock_run)."""
+    if (Path(out_dir) / f".{scene.name}.lock").is_file():
+        lock_run(Path(out_dir), scene.name).close()      # another run writing there now: refused before all else
     # what the run needs, before anything is placed, allocated or written
     from .resources import check_resources
     start = plan_run(scene, out_dir, resume=resume, overwrite=overwrite)
@@ -112,6 +115,18 @@ def run_scene(scene: Scene, out_dir: str = "videos", arch: str = "cpu", resume: 
         return {**read_summary(outputs(Path(out_dir), scene.name)["json"]), "already_complete": True}
     check_resources(scene)
     out = check_output_dir(out_dir)
+    lock = lock_run(out, scene.name)
+    try:
+        return _run_locked(scene, out, start, resume=resume, progress=progress, arch=arch, threads=threads,
+                           reuse=reuse, checkpoint_every_s=checkpoint_every_s, stop_after_steps=stop_after_steps,
+                           rollback=rollback)
+    finally:
+        Path(lock.name).unlink(missing_ok=True)        # the folder as the run left it, no lock behind
+        lock.close()
+
+
+def _run_locked(scene: Scene, out: Path, start: str, *, resume, progress, arch, threads, reuse, checkpoint_every_s,
+                stop_after_steps, rollback) -> dict:
     files = outputs(out, scene.name)
     if start == "overwrite":
         remove_run(files)
@@ -133,6 +148,9 @@ def run_scene(scene: Scene, out_dir: str = "videos", arch: str = "cpu", resume: 
             raise SceneError(f"--resume: {files['ckpt']} has already simulated {duration(done * scene.dt)} "
                              f"({done} steps), more than run.hours = {scene.hours:g} h asks; give --hours "
                              f"{done * scene.dt / 3600:.6g} or more (the checkpoint is kept)")
+        if files["gsd"].is_file():
+            from .trajectory import trim_after
+            trim_after(str(files["gsd"]), done)     # frames written past the checkpoint are made again
 
     # place the cells before Taichi starts: a density the start cannot place is bad input (one line, exit 2), and a
     # resumed run takes its state from the checkpoint instead of placing cells it would throw away

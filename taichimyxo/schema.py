@@ -279,7 +279,9 @@ def check_scene(scene) -> None:
     if scene.width >= scene.length:
         raise SceneError(f"cell.width_um = {scene.width:g} must be smaller than cell.length_um = {scene.length:g}")
     if scene.n_cells < 1:
-        raise SceneError(f"population gives {scene.n_cells} cells in {Lx:g} x {Ly:g} µm; need at least 1")
+        raise SceneError(f"population.density_cells_per_cm2 = {scene.raw['population']['density_cells_per_cm2']:g} "
+                         f"(population.cells = {scene.raw['population']['cells']}) gives {scene.n_cells} cells in "
+                         f"{Lx:g} x {Ly:g} µm; need at least 1")
     af = scene.area_fraction
     limit = {"random": RANDOM_MAX_AREA_FRACTION, "aligned": 1.0 + 1e-9, "spiral": 0.9}[scene.start]
     if af > limit:
@@ -301,7 +303,7 @@ def check_scene(scene) -> None:
         raise SceneError(f"run.step_control = 'error' needs run.integrator = 'explicit' (not "
                          f"{scene.integrator!r}): its error estimate is the explicit step's")
     if scene.hours * 3600 < scene.dt:
-        raise SceneError(f"run.hours = {scene.hours:g} is shorter than one step")
+        raise SceneError(f"run.hours = {scene.hours:g} is shorter than one step (run.dt_ms = {scene.dt * 1e3:g})")
     o = scene.raw["output"]
     if o["color_min"] or o["color_max"]:
         if o["color"] not in ("speed", "strain"):

@@ -200,6 +200,37 @@ def _frame_from_gsd(g, N: int, width: float, meta: dict, has_velocity: bool = Fa
                  particle_velocity=vel)
 
 
+def trim_after(path: str, step: int) -> int:
+    """Drop the frames after `step` (a resume point: frames a run wrote past its last checkpoint before it was
+    killed or its disk filled), rewriting the file through a temporary one so it stays readable throughout; the
+    run's events table loses its rows after `step` too. Returns the frames dropped."""
+    hoomd = _gsd()
+    with hoomd.open(path, "r") as t:
+        steps = [int(f.configuration.step) for f in t]
+        keep = sum(1 for s in steps if s <= step)
+        if keep < len(steps):
+            tmp = path + ".trim.tmp"
+            with hoomd.open(tmp, "w") as out:
+                for i in range(keep):
+                    f = t[i]
+                    if i > 0:
+                        f.log.pop("taichimyxo/scene_json", None)    # frame 0's, which reading repeats
+                    out.append(f)
+    if keep < len(steps):
+        os.replace(tmp, path)
+    from .event_table import events_path
+    ev = events_path(path)
+    if os.path.isfile(ev):
+        with open(ev, encoding="utf-8") as f:
+            lines = f.readlines()
+        kept = lines[:1] + [ln for ln in lines[1:] if int(ln.split(",")[1]) <= step]
+        if len(kept) < len(lines):
+            with open(ev + ".tmp", "w", encoding="utf-8") as f:
+                f.writelines(kept)
+            os.replace(ev + ".tmp", ev)
+    return len(steps) - keep
+
+
 def count_frames(path: str) -> int:
     with _gsd().open(path, "r") as t:
         return len(t)

@@ -149,8 +149,9 @@ class Checkpoint(Writer):
     def finish(self, run) -> None:
         if run.status in ("interrupted", "failed"):
             write_checkpoint(run.sim, self.path, session_totals(self.before, run.wall_seconds, run.wall_by_hour))
-        elif self.remove_when_completed and self.path.is_file():
+        elif run.status == "completed" and self.remove_when_completed and self.path.is_file():
             self.path.unlink()
+        # no_space: the last checkpoint stays the resume point (the trajectory may lack this state's frame)
 
 
 def write_checkpoint(sim, path: Path, totals: dict | None = None) -> None:
@@ -161,16 +162,34 @@ def write_checkpoint(sim, path: Path, totals: dict | None = None) -> None:
     for k, v in (totals or {}).items():
         st[k] = np.asarray(v, np.int64 if k == "sessions" else np.float64)
     tmp = path.with_name(path.name + ".tmp.npz")
-    np.savez(tmp, **st)
+    try:
+        np.savez(tmp, **st)
+    except OSError:
+        tmp.unlink(missing_ok=True)         # a full disk: the previous checkpoint stays whole
+        raise
     os.replace(tmp, path)
 
 
 def read_checkpoint(path, scene) -> dict:
     """A checkpoint's arrays, refused (ValueError) when it was written for different scene parameters."""
+    import zipfile
+
     import numpy as np
-    ckpt = dict(np.load(path, allow_pickle=False))
+    try:
+        ckpt = dict(np.load(path, allow_pickle=False))
+    except FileNotFoundError:
+        raise
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
+        raise ValueError(f"{path} cannot be read ({type(e).__name__}: {e}; cut short or corrupted); it is left as "
+                         f"it is: --overwrite to start the run again") from None
+    if "fingerprint" not in ckpt:
+        raise ValueError(f"{path} is not a taichimyxo checkpoint (it has no fingerprint); it is left as it is: "
+                         f"--overwrite to start the run again")
     if str(ckpt.get("fingerprint")) != scene.fingerprint():
         raise ValueError(f"{path} was written for different scene parameters")
+    if "step" not in ckpt:
+        raise ValueError(f"{path} is not a whole checkpoint (it has no step); it is left as it is: --overwrite to "
+                         f"start the run again")
     return ckpt
 
 
@@ -338,7 +357,13 @@ class Summary(Writer):
             run.sim.sessions_before or (previous_sessions(self.path, run.sim.scene) if self.resumed else {}))
         self.summary = run_summary(run, self.files, self.checkpoint, before, self.setup_seconds, self.arch)
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self.path.write_text(json.dumps(self.summary, indent=1))
+        tmp = self.path.with_name(self.path.name + ".tmp")
+        try:
+            tmp.write_text(json.dumps(self.summary, indent=1))
+        except OSError:
+            tmp.unlink(missing_ok=True)     # the summary before it stays whole
+            raise
+        os.replace(tmp, self.path)
 
 
 def run_summary(run, files: dict, checkpoint, before: dict, setup_s: float, arch: str) -> dict:
@@ -374,7 +399,7 @@ def run_summary(run, files: dict, checkpoint, before: dict, setup_s: float, arch
     }
     if scene.step_control == "error":       # steps taken, scene steps they covered, mean and current multiple
         summary["step_control"] = sim.solver_stats()
-    if status in ("interrupted", "failed") and checkpoint is not None:
+    if status in ("interrupted", "failed", "no_space") and checkpoint is not None and Path(checkpoint).is_file():
         summary["files"]["checkpoint"] = Path(checkpoint).name
     if run.broken is not None:
         summary["invariant_broken"] = run.broken

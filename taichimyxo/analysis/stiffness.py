@@ -8,6 +8,12 @@ convention of the claims table), from its analysis summary:
   fraction_in_aggregates  fraction of the cells in rotating aggregates
   mean_cluster_size       mean size of the cluster a cell is in, cells (touching cells; clusters of one included)
   long_lived_fraction     fraction of aggregate-frames in tracks living >= stable_lifetime_min (10 min)
+  rigid_fraction          fraction of the cells in aggregates that rotate rigidly by their speed profile: per frame
+                          (frames with speeds) the n_cells of the aggregates whose rigidity exponent (track series
+                          'rigidity_exponent') is >= RIGID_EXPONENT (0.5), summed, over the population's cells; an
+                          aggregate whose exponent cannot be judged (a single ring of cells) is not rigid. None when
+                          the tracks keep no per-frame exponents (records made before they were kept)
+                          (EXTRA_MEASURES: judged, not in the figures' CSV table nor plot)
 Per k_a and kind of run: mean ± SD over the seeds (n seeds).
 
 The statements (Effect of cell bending stiffness, Results):
@@ -20,13 +26,19 @@ The statements (Effect of cell bending stiffness, Results):
   stiffness_very_flexible_many_small_stable: very flexible cells form many small, stable aggregates (S3A Fig).
     Consistent when at k_a = 1e-18 aggregates per frame are the most and cells per aggregate the fewest of the
     stiffnesses that form aggregates, and >= 50 % of its aggregate-frames are in long-lived tracks.
-  stiffness_very_rigid_none: very rigid cells form no circular aggregates (S3D Fig). Consistent when at
-    k_a = 1e-15 fewer than 0.5 aggregates per frame hold fewer than 5 % of the cells.
+  stiffness_very_rigid_none: very rigid cells form no circular aggregates (S3D Fig): "rigid cells cannot bend and
+    are unlikely to generate a rotation seed or initiate the rotation of the entire stream", and the paper's
+    circular aggregates rotate as rigid bodies (next paragraph). Very rigid cells here do circulate, in polygon
+    rings of straight cells, which the aggregate finder counts; so the statement is judged by rigid_fraction:
+    consistent when at k_a = 1e-15 it is below VERY_RIGID_MAX_RIGID_FRACTION (0.05) and below the flexible runs'
+    (k_a = 1e-17) where those are measured; the fraction in any rotating aggregate is reported beside it. "Not
+    measurable here" when the very rigid runs keep no per-frame rigidity exponents.
 A statement whose runs are missing, or shorter than MIN_HOURS, says "not measurable here" and why."""
 from __future__ import annotations
 
 import numpy as np
 
+from .aggregate_measure import RIGID_EXPONENT
 from .stats import late_start
 
 STIFFNESS = {1e-18: "very flexible", 1e-17: "flexible", 1e-16: "rigid", 1e-15: "very rigid"}
@@ -37,14 +49,45 @@ MEASURES = {
     "mean_cluster_size": "mean cluster size (cells), non-guided",
     "long_lived_fraction": "fraction of aggregate-frames long-lived",
 }
+# measures judged by the statements but not tabled or plotted by the figures (taichimyxo.figures.stiffness)
+EXTRA_MEASURES = {
+    "rigid_fraction": f"fraction of cells in rigidly rotating aggregates (alpha >= {RIGID_EXPONENT:g})",
+}
 # aggregates form within the first hour and grow for hours; the paper's statements are at 6 h
 MIN_HOURS = 1.0
+# very rigid cells form no circular aggregates: fewer than this fraction of the cells in rigidly rotating ones
+VERY_RIGID_MAX_RIGID_FRACTION = 0.05
 
 
 def _mean(x) -> float | None:
     a = np.asarray([v for v in x if v is not None], float)
     a = a[np.isfinite(a)]
     return float(a.mean()) if len(a) else None
+
+
+def rigid_fraction(summary: dict) -> float | None:
+    """The fraction of the population's cells in rigidly rotating aggregates (alpha >= RIGID_EXPONENT), per frame
+    from the tracks' series, mean over the frames with speeds of the last quarter; None when the tracks keep no
+    per-frame rigidity exponents or no frame of the last quarter has speeds."""
+    tracks = summary.get("tracks", [])
+    if any("rigidity_exponent" not in tr["series"] for tr in tracks):
+        return None
+    t = np.asarray(summary["timeseries"]["time_min"], float)
+    if not len(t):
+        return None
+    without = {round(float(x), 4) for x in summary["meta"].get("frames_without_speed_min") or []}
+    window = [round(float(x), 4) for x in t[late_start(len(t)):]]
+    window = [x for x in window if x not in without]
+    if not window:
+        return None
+    rigid = dict.fromkeys(window, 0)
+    for tr in tracks:
+        s = tr["series"]
+        for tm, n, al in zip(s["time_min"], s["n_cells"], s["rigidity_exponent"]):
+            k = round(float(tm), 4)
+            if k in rigid and al is not None and al >= RIGID_EXPONENT:
+                rigid[k] += n
+    return float(np.mean(list(rigid.values()))) / float(summary["meta"]["n_cells"])
 
 
 def run_measures(summary: dict) -> dict:
@@ -60,16 +103,18 @@ def run_measures(summary: dict) -> dict:
                 fraction_in_aggregates=_mean(ts["fraction_in_aggregates"][q0:]),
                 mean_cluster_size=_mean(ts["mean_cluster_size_weighted"][q0:]),
                 long_lived_fraction=summary["lifetimes"].get("fraction_aggregate_frames_long_lived"),
+                rigid_fraction=rigid_fraction(summary),
                 hours=float(t[-1]) / 60.0 if len(t) else 0.0)
 
 
-def series(records: list[dict]) -> list[dict]:
-    """records: dict(kind, k_a, seed, measures) per run -> one row per (kind, k_a, measure): mean, sd, n, values."""
+def series(records: list[dict], measures=MEASURES) -> list[dict]:
+    """records: dict(kind, k_a, seed, measures) per run -> one row per (kind, k_a, measure of `measures`): mean,
+    sd, n, values."""
     out = []
     for kind in sorted({r["kind"] for r in records}):
         for ka in sorted({r["k_a"] for r in records if r["kind"] == kind}):
             rs = [r for r in records if r["kind"] == kind and r["k_a"] == ka]
-            for m in MEASURES:
+            for m in measures:
                 v = [r["measures"].get(m) for r in rs if r["measures"].get(m) is not None]
                 out.append(dict(kind=kind, k_a_N_m=ka, stiffness=STIFFNESS.get(ka, ""), measure=m,
                                 mean=float(np.mean(v)) if v else None,
@@ -134,7 +179,7 @@ def _trend_row(table, kind, measure, cid, claim, paper, scenes, kas=None, sign=1
 
 def stiffness_rows(records: list[dict]) -> list[dict]:
     """The four statements as claims-table rows (id, claim, paper, measured, status, values)."""
-    table = series(records)
+    table = series(records, {**MEASURES, **EXTRA_MEASURES})
     rows = []
     row, _ = _trend_row(table, "non-guided", "mean_cluster_size", "stiffness_clusters_non_guided",
                         "Non-guided clusters grow with bending stiffness (mean cluster size against k_a)",
@@ -173,20 +218,39 @@ def stiffness_rows(records: list[dict]) -> list[dict]:
                          "aggregates", paper, measured, _short(table, "active", (1e-18,) + tuple(others)) or
                          ("consistent" if good else "not consistent"),
                          dict(n_aggregates=n_agg, aggregate_cells=cells, long_lived_fraction=life)))
-    frac = _pick(table, "active", "fraction_in_aggregates")
-    paper = ("very rigid cells do not form circular aggregates (S3D Fig, S7 Video): they cannot bend to make a "
-             "rotation seed")
-    if 1e-15 not in n_agg or 1e-15 not in frac:
-        rows.append(_row("stiffness_very_rigid_none", "Very rigid cells: no circular aggregates", paper, "no runs",
-                         _missing("active", "k_a = 1e-15", "S3FigD"), {}))
-    else:
-        a, f = n_agg[1e-15]["mean"], frac[1e-15]["mean"]
-        rows.append(_row("stiffness_very_rigid_none", "Very rigid cells: no circular aggregates", paper,
-                         f"k_a = 1e-15: {_fmt(n_agg[1e-15])} aggregates per frame holding {_fmt(frac[1e-15])} of "
-                         f"the cells", _short(table, "active", (1e-15,)) or
-                         ("consistent" if a < 0.5 and f < 0.05 else "not consistent"),
-                         dict(n_aggregates=n_agg[1e-15], fraction_in_aggregates=frac[1e-15])))
+    rows.append(_very_rigid_row(table, n_agg))
     return rows
+
+
+def _very_rigid_row(table, n_agg) -> dict:
+    """stiffness_very_rigid_none (module docstring): the fraction of cells in rigidly rotating aggregates at
+    k_a = 1e-15, below VERY_RIGID_MAX_RIGID_FRACTION and below the flexible runs' (1e-17) where measured."""
+    cid = "stiffness_very_rigid_none"
+    claim = "Very rigid cells: no circular aggregates (cells in rigidly rotating ones)"
+    paper = ("very stiff cells do not form circular aggregates (S3D Fig, S7 Video): rigid cells cannot bend and are "
+             "unlikely to generate a rotation seed or initiate the rotation of the entire stream")
+    frac = _pick(table, "active", "fraction_in_aggregates")
+    rig = _pick(table, "active", "rigid_fraction")
+    vr, fl = 1e-15, 1e-17
+    if vr not in frac:
+        return _row(cid, claim, paper, "no runs", _missing("active", "k_a = 1e-15", "S3FigD"), {})
+
+    def at(k):
+        r = f"{_fmt(rig[k])} of the cells in rigidly rotating aggregates (α >= {RIGID_EXPONENT:g})" if k in rig \
+            else "rigidly rotating: not measurable (no per-frame rigidity exponents kept)"
+        return f"k_a = {k:g} ({STIFFNESS[k]}): {r}; {_fmt(frac.get(k))} in any rotating aggregate " \
+               f"({_fmt(n_agg.get(k))} aggregates per frame)"
+    measured = "; ".join(at(k) for k in (vr, fl) if k in frac)
+    values = dict(rigid_fraction=rig.get(vr), fraction_in_aggregates=frac.get(vr), n_aggregates=n_agg.get(vr),
+                  flexible_rigid_fraction=rig.get(fl), flexible_fraction_in_aggregates=frac.get(fl))
+    if vr not in rig:
+        return _row(cid, claim, paper, measured, "not measurable here: the very rigid runs' analyses keep no per-frame "
+                    "rigidity exponents (records made before they were kept); claims on their trajectories measure "
+                    "them", values)
+    why = _short(table, "active", (vr, fl) if fl in rig else (vr,))
+    f = rig[vr]["mean"]
+    ok = f < VERY_RIGID_MAX_RIGID_FRACTION and (fl not in rig or f < rig[fl]["mean"])
+    return _row(cid, claim, paper, measured, why or ("consistent" if ok else "not consistent"), values)
 
 
 def records_from_runs(runs: list[dict]) -> list[dict]:
