@@ -118,7 +118,7 @@ def _build_parser() -> argparse.ArgumentParser:
     d = sub.add_parser("decisions", help="the decision study's table from decision sweeps' results (decision x "
                        "claim, mean ± SD over seeds; docs/decisions.md)")
     d.add_argument("folders", nargs="+", metavar="DIR", help="a decision sweep's --out folder (sweeps/decisions.toml, "
-                   "sweeps/decisions_dense.toml)")
+                   "sweeps/decisions_dense.toml), or a decisions.json an earlier table wrote (its runs join)")
     d.add_argument("--out", default=".", help="folder for decisions.md/.csv/.json (default: current folder)")
 
     v = sub.add_parser("videos", help="regenerate the supplementary videos S1-S17")

@@ -54,3 +54,13 @@ def test_rigid_fraction_counts_cells_of_rigidly_rotating_aggregates_over_the_las
               {"series": {"time_min": [1.0], "n_cells": [50], "rigidity_exponent": [1.0]}}]       # too early
     a = {"meta": {"n_cells": 100}, "timeseries": {"time_min": [1.0, 2.0, 3.0, 4.0]}, "tracks": tracks}
     assert rigid_fraction(a) == pytest.approx(0.2)                # the last quarter is t = 4: 20 of 100 cells
+
+
+def test_a_kept_decisions_json_joins_the_runs_of_a_folder_once_each(tmp_path):
+    for s in (1, 2):
+        _run(tmp_path / "a", f"d{s}", "S4", {}, s, 0.5 + s / 10, 0.5)
+    _run(tmp_path / "b", "d3", "S4", {}, 3, 0.9, 0.5)
+    assert main(["decisions", str(tmp_path / "a"), "--out", str(tmp_path / "kept")]) == 0
+    runs = read_runs([tmp_path / "kept" / "decisions.json", tmp_path / "a", tmp_path / "b"])
+    assert sorted(r["run"] for r in runs) == ["d1", "d2", "d3"]
+    assert readings(runs)[0]["cells"]["S4 edge"]["n"] == 3

@@ -2,7 +2,8 @@
 claims it bears on.
 
 ``decision_table(roots)`` reads the finished runs of a decision sweep (``sweeps/decisions.toml``,
-``sweeps/decisions_dense.toml``: each run folder's ``result.json``, ``scene.toml``, analysis and trajectory) and sorts
+``sweeps/decisions_dense.toml``: each run folder's ``result.json``, ``scene.toml``, analysis and trajectory; or the
+runs an earlier table kept in its ``decisions.json``) and sorts
 them by their base scene and by the values their resolved scenes hold for the decision keys (``DECISIONS``), not by
 the names of their points: a point of one grid that is another's default counts for both. A run is a reading of
 decision D when every other decision key holds its base scene's value; the drag ratio and self-following are also
@@ -128,16 +129,28 @@ def read_run(run_dir: Path) -> dict | None:
 
 
 def read_runs(roots) -> list[dict]:
-    out = []
+    """The finished runs under each sweep folder, or kept in a decisions.json an earlier table wrote (so a study
+    finished over several machines or sessions joins its parts); a run found twice counts once."""
+    out: dict = {}
     for root in roots:
-        runs = Path(root) / "runs"
+        root = Path(root)
+        if root.is_file() and root.suffix == ".json":
+            try:
+                kept = json.loads(root.read_text())["runs"]
+            except (OSError, ValueError, KeyError, TypeError):
+                raise FileNotFoundError(f"{root}: not a decisions.json (it lists no runs)") from None
+            for r in kept:
+                out.setdefault(r["run"], r)
+            continue
+        runs = root / "runs"
         if not runs.is_dir():
-            raise FileNotFoundError(f"{root}: no runs/ folder (a sweep's --out folder holds one)")
+            raise FileNotFoundError(f"{root}: no runs/ folder (a sweep's --out folder holds one) and not a "
+                                    f"decisions.json")
         for d in sorted(runs.iterdir()):
             r = read_run(d) if d.is_dir() else None
             if r is not None:
-                out.append(r)
-    return out
+                out[r["run"]] = r
+    return list(out.values())
 
 
 def defaults_of(scene_name: str) -> dict:
