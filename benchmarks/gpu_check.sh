@@ -41,6 +41,9 @@ SCENES=${GPU_CHECK_SCENES:-S1,S3,S11}
 STEPS=${GPU_CHECK_STEPS:-500}
 WORKERS=${GPU_CHECK_WORKERS:-6}
 mkdir -p "$OUT"
+# scratch files in a fresh folder of their own, removed at the end (two checks on one machine never share one)
+SCRATCH="$(mktemp -d "${TMPDIR:-/tmp}/gpu_check.XXXXXX")"
+trap 'rm -rf "$SCRATCH"' EXIT
 exec > >(tee -a "$OUT/gpu_check.log") 2>&1
 export PYTHONUNBUFFERED=1 PYTHONPATH="$PWD${PYTHONPATH:+:$PYTHONPATH}"
 t0=$(date +%s)
@@ -49,8 +52,8 @@ stamp() { echo "== $(( $(date +%s) - t0 )) s: $*"; }
 stamp "install"
 if ! "$PY" -c "import taichi" 2>/dev/null; then
     if ls .whl/*.whl >/dev/null 2>&1; then
-        timeout -k 5 60 "$PY" -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --target /tmp/site \
-            .whl/*.whl && export PYTHONPATH="$PYTHONPATH:/tmp/site"
+        timeout -k 5 60 "$PY" -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --target "$SCRATCH/site" \
+            .whl/*.whl && export PYTHONPATH="$PYTHONPATH:$SCRATCH/site"
     else
         timeout -k 5 240 "$PY" -m pip install -q -e '.[test]'
     fi
@@ -73,21 +76,21 @@ stamp "gpu tests (background, limit 200 s) and compiling the benchmark's kernels
 xdist=""
 "$PY" -c "import xdist" 2>/dev/null && xdist="-n $WORKERS"
 TAICHIMYXO_GPU_REPORT="$OUT/gpu_compare.jsonl" timeout -k 10 200 "$PY" -m pytest tests/test_gpu.py -m gpu -rs \
-    -p no:cacheprovider $xdist --junitxml="$OUT/gpu_tests.xml" > /tmp/gpu_tests.txt 2>&1 &
+    -p no:cacheprovider $xdist --junitxml="$OUT/gpu_tests.xml" > "$SCRATCH/gpu_tests.txt" 2>&1 &
 tests=$!
 compiling=()
 for s in $SIZES; do
     for sc in ${SCENES//,/ }; do
         timeout -k 5 180 "$PY" -m taichimyxo bench throughput --arch "$ARCH" --scenes "$sc" --sizes "$s" --steps 1 \
-            --warm 2 --out "/tmp/gpu_check_compile/$sc-$s" > "/tmp/gpu_check_compile_$sc-$s.txt" 2>&1 &
+            --warm 2 --out "$SCRATCH/compile/$sc-$s" > "$SCRATCH/compile_$sc-$s.txt" 2>&1 &
         compiling+=($!)
     done
 done
 wait "${compiling[@]}"
 stamp "compiled; waiting for the tests"
 wait $tests; echo "pytest exit status $?"
-cat /tmp/gpu_tests.txt
-tail -n 3 /tmp/gpu_check_compile_*.txt
+cat "$SCRATCH/gpu_tests.txt"
+tail -n 3 "$SCRATCH"/compile_*.txt
 
 for s in $SIZES; do
     limit=45; [ "$s" = 16 ] && limit=75

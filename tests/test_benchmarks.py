@@ -120,3 +120,17 @@ def test_accuracy_outcomes_leaves_an_outcome_measured_in_few_seeds_unjudged(tmp_
     md = (out / "accuracy_outcomes.md").read_text()
     assert "outside the reference's seed range on speed_p95_vb (not judged, measured in at most half the seeds: " \
            "edge_speed_vb)" in md
+
+
+def test_the_suite_lists_every_benchmark_of_the_folder_and_refuses_an_unknown_one(capsys):
+    """benchmarks/suite.py is the one entry point: every script in benchmarks/ is listed (or named as a part that
+    is not a benchmark), and an unknown name is one line with exit status 2."""
+    suite = _benchmark("suite")
+    scripts = {p.stem for p in (REPO / "benchmarks").iterdir() if p.suffix in (".py", ".sh")}
+    unlisted = scripts - suite.NOT_BENCHMARKS - set(suite.BENCHMARKS)
+    assert not unlisted, unlisted
+    assert suite.main([]) == 0
+    out = capsys.readouterr().out
+    assert all(f"  {n} " in out for n in suite.present())
+    assert suite.main(["no_such_benchmark"]) == 2
+    assert "unknown benchmark 'no_such_benchmark'" in capsys.readouterr().err
