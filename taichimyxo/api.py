@@ -30,6 +30,18 @@ class RenderOptionError(ValueError):
     """A colouring option render cannot use (a range for a colouring without one, vmin above vmax, ...)."""
 
 
+def expect(value, kind, call: str, example: str) -> None:
+    """A wrong kind of argument: one sentence naming the call, the argument and a valid value (TypeError)."""
+    if not isinstance(value, kind):
+        got = type(value).__name__ + (f" {value!r}" if isinstance(value, (str, int, float)) else "")
+        raise TypeError(f"{call}: expected {example}; got {got}")
+
+
+def positive_int(value, call: str) -> None:
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise ValueError(f"{call} = {value!r}: expected a whole number >= 1, e.g. 1")
+
+
 def load_scene(name_or_path, set: dict | None = None, *, seed: int | None = None, hours: float | None = None,
                preview: bool = False, force: bool = False) -> Scene:
     """The scene `name_or_path` (a name like "S3", or a TOML file), validated.
@@ -37,6 +49,8 @@ def load_scene(name_or_path, set: dict | None = None, *, seed: int | None = None
     set: values by dotted key, {"domain.width_um": 30, "guiding.kind": "active"} (or nested, {"domain": {...}});
     seed, hours: run.seed, run.hours. preview: the small, short version (values given here are never scaled).
     A time step above the integrator's stability limit is refused (SceneError) unless force=True."""
+    if set is not None:
+        expect(set, dict, "load_scene(set=...)", "a dict of values by dotted key, e.g. {'cell.k_a_N_m': 1e-16}")
     over: dict = {}
     for key, val in (set or {}).items():
         if isinstance(val, dict):
@@ -61,6 +75,8 @@ def run(sim, *, seconds=None, minutes=None, hours=None, steps=None, writers=(), 
     with `writers` attached (taichimyxo.writers), closed at the end. progress: show the progress line. options:
     taichimyxo.run_loop.drive's (catch_signals, chunk_steps, speed_window_s, rollback). Returns the Run (status
     "completed", or "interrupted" after Ctrl-C, or "failed" with Run.broken naming a broken invariant)."""
+    from .simulation import Simulation
+    expect(sim, Simulation, "run(sim, ...)", "a Simulation, e.g. tm.Simulation(tm.load_scene('S3'))")
     return sim.run(seconds=seconds, minutes=minutes, hours=hours, steps=steps, writers=writers, progress=progress,
                    **options)
 
@@ -68,6 +84,11 @@ def run(sim, *, seconds=None, minutes=None, hours=None, steps=None, writers=(), 
 def render_frame(frame, color: str = "speed", size=(1920, 1080), **options):
     """One Frame as an RGB image, (h, w, 3) uint8 (taichimyxo.render.render_frame: legend, time, scale bar;
     options: fit, vmin, vmax, background, decorations, title, ...)."""
+    from .frame import Frame
+    expect(frame, Frame, "render_frame(frame)", "a Frame, e.g. sim.frame()")
+    colors = SCHEMA["output"]["color"][2]
+    if color not in colors:
+        raise ValueError(f"render_frame(color={color!r}): expected one of {', '.join(colors)}")
     from .render import render_frame as render
     return render(frame, size=size, color=color, **options)
 
@@ -112,6 +133,7 @@ def analyze(trajectory, out_dir=None, *, every: int = 1, v_b: float | None = Non
     not a trajectory of cells is a TrajectoryError before anything is written. measures: also defects, cluster
     sizes, correlations, MSD and reversal events (taichimyxo.analysis.measures; ``analyze --measures``), with
     measure_params overriding its defaults (e.g. dict(smoothing_um=2.0, spacing_um=1.0))."""
+    positive_int(every, "analyze(every)")
     from .trajectory import check_trajectory
     check_trajectory(os.fspath(trajectory))
     from .outdir import check_out_folder
@@ -129,6 +151,7 @@ def claims(trajectories, out_dir=None, *, every: int = 1, v_b: float | None = No
     each row: claim, measured, paper, status, runs. Every file is checked (a missing file, or one that is neither
     a trajectory of cells nor a record with its analysis, is a TrajectoryError) and the output folder proved
     writable before any analysis; the tables are replaced only by complete ones."""
+    positive_int(every, "claims(every)")
     from .analysis.claim_runs import check_run_file
     from .scene_run import check_output_dir
     from .trajectory import TrajectoryError
@@ -153,5 +176,6 @@ def claims(trajectories, out_dir=None, *, every: int = 1, v_b: float | None = No
 
 def run_scene(scene: Scene, out_dir: str = "videos", **options) -> dict:
     """Everything ``python -m taichimyxo scene`` writes (taichimyxo.scene_run.run_scene); returns the summary."""
+    expect(scene, Scene, "run_scene(scene)", "a Scene, e.g. tm.load_scene('S3')")
     from .scene_run import run_scene as run_all
     return run_all(scene, out_dir=out_dir, **options)

@@ -168,6 +168,12 @@ def drive(sim, n_steps: int, writers=(), *, chunk_steps: int = 2000, speed_windo
     (False keeps them open for a next call; ``finish`` is called either way). rollback: redo a chunk that breaks an
     invariant at split steps (module docstring); False stops the run at the first breach."""
     from .neighbours import NeighbourOverflow
+    if not (hasattr(sim, "advance") and hasattr(sim, "scene")):        # a Simulation (not imported: no cycle)
+        raise TypeError(f"drive(sim, n_steps): expected a Simulation, e.g. tm.Simulation(tm.load_scene('S3')); got "
+                        f"{type(sim).__name__}")
+    if isinstance(n_steps, bool) or not isinstance(n_steps, (int,)) and not hasattr(n_steps, "__index__") \
+            or int(n_steps) < 0:
+        raise ValueError(f"drive(sim, n_steps = {n_steps!r}): expected a whole number of steps >= 0, e.g. 1000")
 
     dt = sim.scene.dt
     writers = sorted(writers, key=lambda w: getattr(w, "order", 0))      # the invariant check first, summary last

@@ -42,6 +42,10 @@ IMEX_OPTIONS = ("contacts", "tol", "max_iter", "iters_per_launch")
 
 def check_options(scene, options: dict) -> None:
     """A misplaced argument names the call that takes it (TypeError, one sentence)."""
+    from .scene import Scene
+    if not isinstance(scene, Scene):
+        got = type(scene).__name__ + (f" {scene!r}" if isinstance(scene, str) else "")
+        raise TypeError(f"Simulation(scene): expected a Scene, e.g. tm.load_scene('S3'); got {got}")
     for k in options:
         if k in OTHER_STARTS:
             raise TypeError(f"Simulation(scene, {k}=...): a start from given cells is {OTHER_STARTS[k]}")

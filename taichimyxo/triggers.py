@@ -75,6 +75,9 @@ class WallClock(Trigger):
         if (seconds is None) == (minutes is None):
             raise ValueError("WallClock: give one of seconds=, minutes=")
         self.seconds = float(seconds if seconds is not None else minutes * 60.0)
+        if not self.seconds >= 0.0:
+            raise ValueError(f"WallClock: the interval must be zero or positive, e.g. seconds=300 (got "
+                             f"{self.seconds:g} s)")
         self.last = time.perf_counter()
 
     def restart(self) -> None:

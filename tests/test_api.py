@@ -168,3 +168,44 @@ def test_a_misplaced_argument_to_simulation_names_the_call_that_takes_it():
         Simulation(sc, tolerance=1e-6)
     with pytest.raises(TypeError, match=r"contacts=.*run.integrator = 'imex'.*'explicit'"):
         Simulation(sc, contacts="coupled")
+
+
+BAD_CALLS = [
+    ("load_scene", lambda tm: tm.load_scene("S99"), "unknown scene 'S99'.*available: S1"),
+    ("load_scene", lambda tm: tm.load_scene("S1", set={"cell.k_a_N_m": -1}), r"cell.k_a_N_m = -1.0: must be positive"),
+    ("load_scene", lambda tm: tm.load_scene("S1", set={"cell.foo": 1}), r"'cell.foo': unknown key"),
+    ("load_scene", lambda tm: tm.load_scene("S1", set=["x"]), r"load_scene\(set=...\): expected a dict.*got list"),
+    ("load_scene", lambda tm: tm.load_scene("S1", seed=-1), r"run.seed = -1: must be zero or positive"),
+    ("Simulation", lambda tm: tm.Simulation("S1"), r"Simulation\(scene\): expected a Scene.*load_scene.*got str"),
+    ("run", lambda tm: tm.run(None, minutes=1), r"run\(sim, ...\): expected a Simulation"),
+    ("render_frame", lambda tm: tm.render_frame(None), r"render_frame\(frame\): expected a Frame, e.g. sim.frame\(\)"),
+    ("render_movie", lambda tm: tm.render_movie("/nonexistent/x.gsd"), r"/nonexistent/x.gsd not found"),
+    ("analyze", lambda tm: tm.analyze("x.gsd", every=0), r"analyze\(every\) = 0: expected a whole number >= 1"),
+    ("claims", lambda tm: tm.claims([]), r"claims needs at least one trajectory"),
+    ("claims", lambda tm: tm.claims(["a.gsd"], every=-2), r"claims\(every\) = -2: expected a whole number"),
+    ("Periodic", lambda tm: tm.Periodic(minutes=-1), r"Periodic: the period must be positive"),
+    ("WallClock", lambda tm: tm.WallClock(seconds=-1), r"WallClock: the interval must be zero or positive, e.g."),
+    ("load_sweep", lambda tm: tm.load_sweep("/nonexistent.toml"), r"sweep file /nonexistent.toml not found"),
+    ("run_scene", lambda tm: tm.run_scene("S1"), r"run_scene\(scene\): expected a Scene, e.g. tm.load_scene"),
+    ("run_sweep", lambda tm: tm.run_sweep("/nonexistent.toml"), r"sweep file /nonexistent.toml not found"),
+    ("drive", lambda tm: tm.drive(None, 5), r"drive\(sim, n_steps\): expected a Simulation"),
+]
+
+
+@pytest.mark.parametrize("name,call,message", BAD_CALLS, ids=[f"{b[0]}-{i}" for i, b in enumerate(BAD_CALLS)])
+def test_every_public_function_refuses_bad_input_in_one_sentence_naming_it(name, call, message):
+    """Each public function of `import taichimyxo as tm`, given a wrong value: one line that names the input and
+    says what is valid, raised before any work (no Taichi, no file written)."""
+    import taichimyxo as tm
+    assert name in tm.__all__
+    with pytest.raises((ValueError, TypeError)) as e:
+        call(tm)
+    text = str(e.value)
+    assert "\n" not in text and re.search(message, text), text
+
+
+def test_every_public_function_is_in_the_table_of_bad_calls():
+    import taichimyxo as tm
+    callables = {n for n in tm._LAZY if n[0].islower() or n in ("Simulation", "Periodic", "WallClock")}
+    checked = {b[0] for b in BAD_CALLS}
+    assert callables <= checked, callables - checked
