@@ -17,6 +17,10 @@ The sweep file (TOML; examples in sweeps/ of the clone):
     cell.k_a_N_m = [1e-18, 1e-17, 1e-16, 1e-15]
     guiding.kind = ["none", "active"]
 
+    [[grid]]                    # instead of one [grid]: several, each a product, the points their union (a
+    scene = ["S3", "S4"]        # point that resolves to an earlier grid's scene runs once); every grid names
+    guiding.pull_on = ["head_particle", "head_segment"]     # its scenes, or none does
+
     [set]                       # scene keys set the same for every point
     output.frame_interval_min = 2
 
