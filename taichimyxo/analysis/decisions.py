@@ -49,11 +49,11 @@ MATRIX = ("cell.drag_ratio_normal", "guiding.self")
 CLAIMS = [
     ("S4 edge", "S4", "edge_speed_vb", "adhesion edge (4/3) v_b = 1.33 v_b (Fig 2E, S2 Text)"),
     ("S4 in aggregates", "S4", "fraction_in_aggregates", "adhesion: stable rotating aggregates"),
-    ("S4 self-curled", "S4", "self_curled", "guiding acts between one bacterium's leading pole and another's "
-     "trailing pole"),
+    ("S4 self-curled", "S4", "self_curled", "no number; guiding acts on 'the tail of another (or the same) "
+     "bacterium'"),
     ("S3 edge", "S3", "edge_speed_vb", "active following: edge above v_b, at most 4 v_b (Fig 2D)"),
     ("S3 in aggregates", "S3", "fraction_in_aggregates", "active following: stable rotating aggregates"),
-    ("S3 self-curled", "S3", "self_curled", "flexible cells: aggregates seeded by several cells (no number given)"),
+    ("S3 self-curled", "S3", "self_curled", "no number; a rotation seed is 'of several flexible cells'"),
     ("S7 rigid rotating", "S7", "rigid_fraction", "very rigid cells form no circular aggregates (S3D Fig)"),
     ("S7 in aggregates", "S7", "fraction_in_aggregates", "very rigid: none"),
     ("S2 in aggregates", "S2", "fraction_in_aggregates", "passive following: occasional small unstable circles"),
