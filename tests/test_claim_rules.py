@@ -17,14 +17,12 @@ import numpy as np
 import pytest
 
 from taichimyxo.analysis import analyze, analyze_frames, synthetic_frames
-from taichimyxo.analysis.claims import (
+from taichimyxo.analysis.claims import claims, edge_speed_vs_size, stiffness
+from taichimyxo.analysis.edge_size import (
     EDGE_SIZE_MAX_EFFECT,
     EDGE_SIZE_MIN_RADIUS_UM,
     EDGE_SIZE_MIN_TRACKED_MIN,
-    claims,
     edge_size_effect,
-    edge_speed_vs_size,
-    stiffness,
 )
 from taichimyxo.analysis.stiffness import VERY_RIGID_MAX_RIGID_FRACTION, run_measures, stiffness_rows
 from taichimyxo.analysis.tracking import size_regression

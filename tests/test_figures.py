@@ -375,19 +375,19 @@ def _records(kind, by_ka: dict, hours=6.0, seeds=(1, 2)):
 def test_stiffness_statements_judged_and_not_measurable():
     from taichimyxo.analysis.stiffness import stiffness_rows
 
-    def act(n, cells, frac, life=0.9):
+    def act(n, cells, frac, life=0.9, rigid=None):
         return dict(n_aggregates=n, aggregate_cells=cells, fraction_in_aggregates=frac, mean_cluster_size=None,
-                    long_lived_fraction=life)
+                    long_lived_fraction=life, rigid_fraction=rigid)
 
-    paper_like = _records("active", {1e-18: act(12, 8, 0.5), 1e-17: act(6, 20, 0.5), 1e-16: act(3, 40, 0.4),
-                                     1e-15: act(0.1, 5, 0.01)})
+    paper_like = _records("active", {1e-18: act(12, 8, 0.5), 1e-17: act(6, 20, 0.5, rigid=0.4),
+                                     1e-16: act(3, 40, 0.4), 1e-15: act(0.1, 5, 0.01, rigid=0.01)})
     paper_like += _records("non-guided", {ka: dict(mean_cluster_size=s) for ka, s in
                                           ((1e-18, 2.0), (1e-17, 3.0), (1e-16, 5.0), (1e-15, 9.0))})
     rows = {r["id"]: r for r in stiffness_rows(paper_like)}
     assert [r["status"] for r in rows.values()] == ["consistent"] * 4
     assert "k_a = 1e-18: 12 ± 0 (n = 2)" in rows["stiffness_very_flexible_many_small_stable"]["measured"]
-    reversed_ = _records("active", {1e-18: act(3, 40, 0.4), 1e-17: act(6, 20, 0.5), 1e-16: act(12, 8, 0.5),
-                                    1e-15: act(4, 10, 0.3)})
+    reversed_ = _records("active", {1e-18: act(3, 40, 0.4), 1e-17: act(6, 20, 0.5, rigid=0.2),
+                                    1e-16: act(12, 8, 0.5), 1e-15: act(4, 10, 0.3, rigid=0.3)})
     rows = {r["id"]: r for r in stiffness_rows(reversed_)}
     assert rows["stiffness_aggregates_larger_fewer"]["status"] == "not consistent"
     assert rows["stiffness_very_rigid_none"]["status"] == "not consistent"

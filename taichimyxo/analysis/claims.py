@@ -31,13 +31,9 @@ below 8 frames), "± SE over tracks" over aggregates followed in time:
    following, (4/3) v_b with adhesion (rigid-body model, S2 Text), about v_b with slime trails; edge faster than a
    free cell for short-range guiding. Consistent: active above the free-cell speed by 2 SE and at most 4 v_b + 2 SE;
    adhesion within 10 % or 2 SE of 4/3 and above the free cells; slime within 10 % or 2 SE of 1.
-8. edge_speed_vs_size: per kind (active following, adhesion), over the tracks of mean radius >= EDGE_SIZE_MIN_RADIUS_UM
-   (3 µm) tracked >= EDGE_SIZE_MIN_TRACKED_MIN (10 min; lifetime_min, else frames x frame interval): the effect
-   size = the change of edge speed across their radius range from the fitted line, slope x (R_max - R_min), over
-   their mean edge speed, with a bootstrap 95 % interval (over tracks, EDGE_SIZE_BOOTSTRAP resamples, fixed seed);
-   the OLS slope ± SE beside it as context. Consistent (size-independent, "appears not to depend on the aggregate
-   size") when |effect| < EDGE_SIZE_MAX_EFFECT (0.25) for each kind with >= 3 such tracks; "too few tracks" when no
-   kind has 3. Not a test of slope = 0: any large sample rejects that for a small real trend.
+8. edge_speed_vs_size: per kind, the change of edge speed across the radius range of the tracks of R >= 3 µm
+   tracked >= 10 min, over their mean edge speed, with a bootstrap 95 % interval; consistent below 25 % for each
+   kind with >= 3 such tracks (edge_size.py; docs/measures.md). Not a test of slope = 0, which any large sample fails.
 9. aggregate_lifetimes: tracks linked by shared cells (tracking.py); per run the median and longest lifetime and
    the fraction of aggregate-frames in tracks living >= ``stable_lifetime_min`` (10 min). Paper: passive following
    gives no stable aggregates, active following and adhesion do. Consistent when every passive run's fraction is
@@ -64,6 +60,7 @@ from typing import Callable
 
 import numpy as np
 
+from . import edge_size as es
 from .aggregate_measure import RIGID_EXPONENT
 from .claim_plots import write_claim_plots
 from .claim_runs import (
@@ -85,18 +82,6 @@ from .spiral import spiral_measures, spiral_row
 from .stats import late_start, series_mean_se
 from .stiffness import records_from_runs, stiffness_rows
 from .summary import json_clean
-from .tracking import size_regression
-
-# Claim 8 (edge speed against aggregate size), docs/measures.md "Claims judged as the paper states them": the tracks
-# it reads (aggregates, not seeds of a few cells: mean radius >= 3 µm, tracked >= 10 min), the largest relative
-# change of edge speed across their radius range still read as "appears not to depend on the aggregate size", and
-# the bootstrap of that change (resamples over tracks, numpy's generator with a fixed seed)
-EDGE_SIZE_MIN_RADIUS_UM = 3.0
-EDGE_SIZE_MIN_TRACKED_MIN = 10.0
-EDGE_SIZE_MAX_EFFECT = 0.25
-EDGE_SIZE_MIN_TRACKS = 3
-EDGE_SIZE_BOOTSTRAP = 2000
-EDGE_SIZE_SEED = 0
 
 
 def _describe(r) -> str:
@@ -275,99 +260,27 @@ def edge_speed_slime(runs, shared):
     return _edge_speed(runs, shared, "slime")
 
 
-def _frame_interval_min(r) -> float:
-    t = np.asarray(r["summary"]["timeseries"]["time_min"], float)
-    return float(np.median(np.diff(t))) if len(t) > 1 else float("nan")
-
-
-def tracked_min(t: dict, frame_min: float) -> float:
-    """How long a track was followed (min): its lifetime_min, else its frames x the run's frame interval."""
-    life = t.get("lifetime_min")
-    return float(life) if life is not None else float(t["n_frames"]) * frame_min
-
-
-def edge_size_tracks(runs) -> tuple[list[dict], dict]:
-    """The tracks claim 8 reads: finite mean radius and edge speed, mean radius >= EDGE_SIZE_MIN_RADIUS_UM, tracked
-    >= EDGE_SIZE_MIN_TRACKED_MIN. Returns (tracks, counts of those left out: small, short)."""
-    keep, out = [], dict(small=0, short=0)
-    for r in runs:
-        dt = _frame_interval_min(r)
-        for t in r["summary"]["tracks"]:
-            R, E = t.get("mean_radius_um"), t.get("mean_edge_speed_um_per_min")
-            if R is None or E is None or not (math.isfinite(R) and math.isfinite(E)):
-                continue
-            if R < EDGE_SIZE_MIN_RADIUS_UM:
-                out["small"] += 1
-            elif not tracked_min(t, dt) >= EDGE_SIZE_MIN_TRACKED_MIN:
-                out["short"] += 1
-            else:
-                keep.append(t)
-    return keep, out
-
-
-def edge_size_effect(R, E, n_boot: int = EDGE_SIZE_BOOTSTRAP, seed: int = EDGE_SIZE_SEED) -> dict:
-    """The effect size of edge speed E against radius R over tracks: slope x (R_max - R_min) / mean E (the fitted
-    line's change across the radius range, relative), and its bootstrap 95 % interval (tracks resampled with
-    replacement; each resample's own slope, range and mean). With size_regression's slope, SE, t."""
-    R, E = np.asarray(R, float), np.asarray(E, float)
-    out = size_regression(R, E)
-    n = len(R)
-    eff = out.get("relative_change_over_range", float("nan")) if n >= 2 else float("nan")
-    ci = [float("nan"), float("nan")]
-    if n >= EDGE_SIZE_MIN_TRACKS and math.isfinite(eff):
-        rng = np.random.default_rng(seed)
-        idx = rng.integers(0, n, size=(n_boot, n))
-        rb, eb = R[idx], E[idx]
-        rc = rb - rb.mean(1, keepdims=True)
-        sxx = (rc * rc).sum(1)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            slope = (rc * (eb - eb.mean(1, keepdims=True))).sum(1) / sxx
-            b = slope * np.ptp(rb, axis=1) / eb.mean(1)
-        b = b[np.isfinite(b)]
-        if len(b):
-            ci = [float(x) for x in np.percentile(b, [2.5, 97.5])]
-    out.update(effect=float(eff), effect_ci95=ci, n_bootstrap=n_boot, bootstrap_seed=seed,
-               radius_range_um=[float(R.min()), float(R.max())] if n else None,
-               mean_edge_speed_um_per_min=float(E.mean()) if n else float("nan"),
-               consistent=bool(abs(eff) < EDGE_SIZE_MAX_EFFECT) if math.isfinite(eff) and n >= EDGE_SIZE_MIN_TRACKS
-               else None)
-    return out
-
-
 @claim("edge_speed_vs_size")
 def edge_speed_vs_size(runs, shared):
     """Edge speed against aggregate size, judged by the size of the change (module docstring, item 8)."""
     vals, parts, judged = {}, [], []
+    MIN_R, MIN_TRACKED, MAX_EFFECT = es.EDGE_SIZE_MIN_RADIUS_UM, es.EDGE_SIZE_MIN_TRACKED_MIN, es.EDGE_SIZE_MAX_EFFECT
     for kind in ("active", "adhesion"):
         rs = runs_of(runs, kind)
         if not rs:
             parts.append(f"{KINDS[kind][0]}: {needs(kind)}")
             continue
-        tr, left = edge_size_tracks(rs)
-        reg = edge_size_effect([t["mean_radius_um"] for t in tr], [t["mean_edge_speed_um_per_min"] for t in tr])
-        reg.update(n_tracks=len(tr), n_left_out_small=left["small"], n_left_out_short=left["short"])
-        vals[kind] = reg
-        why = (f"left out: {left['small']} of R < {EDGE_SIZE_MIN_RADIUS_UM:g} µm, {left['short']} tracked < "
-               f"{EDGE_SIZE_MIN_TRACKED_MIN:g} min")
-        if len(tr) < EDGE_SIZE_MIN_TRACKS:
-            parts.append(f"{KINDS[kind][0]}: {len(tr)} track(s) of R >= {EDGE_SIZE_MIN_RADIUS_UM:g} µm tracked >= "
-                         f"{EDGE_SIZE_MIN_TRACKED_MIN:g} min, too few ({why})")
-            continue
-        lo, hi = reg["effect_ci95"]
-        parts.append(f"{KINDS[kind][0]}: edge speed changes by {100 * reg['effect']:+.0f} % (95 % CI "
-                     f"{100 * lo:+.0f} to {100 * hi:+.0f} %) of its mean {reg['mean_edge_speed_um_per_min']:.1f} "
-                     f"µm/min across R = {reg['radius_range_um'][0]:.1f}-{reg['radius_range_um'][1]:.1f} µm over "
-                     f"{len(tr)} tracks ({why}); slope "
-                     f"{plus_minus(reg['slope_um_per_min_per_um'], reg['stderr'], '.3f')} µm/min per µm "
-                     f"(t = {reg['t']:.1f})")
-        judged.append(reg["consistent"])
+        vals[kind], text, verdict = es.judge_kind(KINDS[kind][0], rs)
+        parts.append(text)
+        if verdict is not None:
+            judged.append(verdict)
     status = (needs("active") if not runs_of(runs, "active", "adhesion") else
-              f"too few tracks (>= {EDGE_SIZE_MIN_TRACKS} of R >= {EDGE_SIZE_MIN_RADIUS_UM:g} µm tracked >= "
-              f"{EDGE_SIZE_MIN_TRACKED_MIN:g} min needed)" if not judged else
+              f"too few tracks (>= {es.EDGE_SIZE_MIN_TRACKS} of R >= {MIN_R:g} µm tracked >= "
+              f"{MIN_TRACKED:g} min needed)" if not judged else
               "consistent" if all(judged) else "not consistent")
     return _row("edge_speed_vs_size", f"Edge speed vs aggregate radius (change across the radius range / mean edge "
-                f"speed, tracks of R >= {EDGE_SIZE_MIN_RADIUS_UM:g} µm tracked >= {EDGE_SIZE_MIN_TRACKED_MIN:g} min; "
-                f"size-independent when |change| < {100 * EDGE_SIZE_MAX_EFFECT:.0f} %)",
+                f"speed, tracks of R >= {MIN_R:g} µm tracked >= {MIN_TRACKED:g} min; "
+                f"size-independent when |change| < {100 * MAX_EFFECT:.0f} %)",
                 "speed of cells at the aggregate edge appears not to depend on the aggregate size (so larger "
                 "aggregates turn slower)", runs_of(runs, "active", "adhesion"), "; ".join(parts), status, vals,
                 plot="edge_vs_radius")
