@@ -1,6 +1,12 @@
 """The benchmark states: the configurations users' runs spend their time in, beside the scenes' starts.
 
     python benchmarks/states.py [--runs DIR]      # (re)makes benchmarks/states/S3-1h.npz
+    python benchmarks/states.py --late           # (re)makes benchmarks/states/S3-6h.npz from the figures' record
+
+- "S3 6 h": the paper-scale S3 (200 x 200 µm, 2000 cells, active following) as its 6 h run ends, the state the late
+  hours of a run are spent in (about 145 rotating aggregates of ~10 cells; docs/figures.md, "S3 at the paper's
+  scale"): the last frame of the figures' paper-scale run, kept in its record
+  (docs/figures/records/Fig2.paper/), so the command needs no simulation and gives the same file every time.
 
 - "S3 1 h": S3 at paper scale (200 x 200 µm, 2000 cells) with the structure it has after one simulated hour:
   rotating aggregates fed by streams. Made from the last frames of two half-scale S3 runs of one hour
@@ -29,8 +35,10 @@ from benchlib import HERE
 
 STATE_DIR = HERE / "states"
 S3_1H = STATE_DIR / "S3-1h.npz"
+S3_6H = STATE_DIR / "S3-6h.npz"
+S3_6H_RECORD = HERE.parent / "docs" / "figures" / "records" / "Fig2.paper" / "scene=S3_seed=1-b78ba39f18.npz"
 SWEEP = HERE.parent / "sweeps" / "bench_states.toml"
-STATES = ("S3 1 h", "S13 dense")
+STATES = ("S3 6 h", "S3 1 h", "S13 dense")
 # the aligned start the dense states were defined with: rows at exactly W (the scenes' own start tilts each cell)
 EXACT_ROWS = {"population": {"aligned_tilt_deg": 0.0}}
 DENSE_WARM_STEPS = 300
@@ -40,6 +48,11 @@ STATE_RUN = {"S13 dense": {"integrator": "explicit", "dt_ms": 2.0}}
 
 def load(name: str):
     """(scene, area multiple, start) of a benchmark state; start is None for a scene's own start."""
+    if name == "S3 6 h":
+        if not S3_6H.is_file():
+            raise SystemExit(f"states: {S3_6H} is missing; make it with `python benchmarks/states.py --late`")
+        z = np.load(S3_6H)
+        return "S3", 1.0, (z["positions"], z["engine_direction"])
     if name == "S3 1 h":
         if not S3_1H.is_file():
             raise SystemExit(f"states: {S3_1H} is missing; make it with `python benchmarks/states.py`")
@@ -105,7 +118,26 @@ def make(runs: Path) -> Path:
     return S3_1H
 
 
-ROWS = (("S3 start", "S3", 1.0, False), ("S3 1 h", None, None, True), ("S13 dense", None, None, True))
+def make_late(record: Path = S3_6H_RECORD) -> Path:
+    """The 6 h state from the record of the figures' paper-scale S3 run (its last frame)."""
+    import json
+    z = np.load(record, allow_pickle=False)
+    meta = json.loads(bytes(z["meta_json"]).decode())
+    scalars = z["last_scalars"]
+    pos = np.asarray(z["last_positions"], np.float64)
+    if pos.shape != (2000, 8, 2):
+        raise SystemExit(f"states: {record} holds {pos.shape[0]} cells, not the paper-scale S3's 2000")
+    STATE_DIR.mkdir(exist_ok=True)
+    np.savez_compressed(S3_6H, positions=pos, engine_direction=np.asarray(z["last_engine_direction"], np.int8),
+                        time_s=np.array(float(scalars[0])), box=np.array([200.0, 200.0]),
+                        record=np.array(record.name))
+    print(f"states: wrote {S3_6H.relative_to(HERE.parent)} ({len(pos)} cells at {float(scalars[0]) / 3600:.2f} h, "
+          f"{S3_6H.stat().st_size // 1024} KB; record of {meta.get('scene', {}).get('name', record.stem)})")
+    return S3_6H
+
+
+ROWS = (("S3 6 h", None, None, True), ("S3 start", "S3", 1.0, False), ("S3 1 h", None, None, True),
+        ("S13 dense", None, None, True))
 
 
 def measure(steps: int, warm: int, names=None) -> list[dict]:
@@ -140,12 +172,16 @@ def main() -> None:
     p = parser(__doc__)
     p.add_argument("--runs", default="benchmarks-results/bench_states",
                    help="folder of the half-scale runs (made by the sweep where missing)")
+    p.add_argument("--late", action="store_true", help="(re)make the 6 h state from the figures' record")
     p.add_argument("--measure", action="store_true",
                    help="measure the states instead (a JSON line per row; benchmarks/threads.py runs this)")
     p.add_argument("--threads", type=int, default=None, help="with --measure: CPU threads")
     p.add_argument("--steps", type=int, default=1000, help="with --measure: steps timed per state")
     p.add_argument("--states", default="", help="with --measure: comma-separated labels (default all)")
     a = p.parse_args()
+    if a.late:
+        make_late()
+        return
     if not a.measure:
         make(Path(a.runs))
         return
