@@ -82,7 +82,7 @@ def measure_strain(method: Method, quick: bool, k_c: float = 0.002) -> dict:
     polarities), each cell tilted by up to 3 degrees, relaxing and jamming. Total strain energy (J) every second;
     compared by its mean over the second half of the run. At k_c = 0.002 N/m (the paper's high-density value) and
     0.01 N/m (low density: the stiffness inside S3's aggregates)."""
-    from taichimyxo.placement import initial_configuration
+    from taichimyxo.physics.placement import initial_configuration
     T = 6.0 if quick else 20.0
     sc = scene_for({"domain": {"width_um": 15.0, "height_um": 15.0},
                     "population": {"start": "aligned", "density_cells_per_cm2": 4e7},
@@ -167,7 +167,7 @@ def measure_cost(method: Method, quick: bool, state: str = "start") -> dict:
     """Wall and CPU time per step at paper scale: 'start' is S3 (2000 cells, 200 x 200 µm, active following) from
     its random start (few contacts); 'dense' is S13 (1440 cells in 60 x 60 µm at area fraction 1, k_c = 0.002 N/m,
     active following) after 1 simulated second, where every cell is in contact (the cost of an aggregate core)."""
-    from taichimyxo.scene import Scene
+    from taichimyxo.io.scene import Scene
     name = "S3" if state == "start" else "S13"
     sc = Scene.load(name, {"output": {"movie": False, "strain": False}, "run": method.run_overrides()})
     sim = make(sc, method)
@@ -195,7 +195,7 @@ MEASURES = {"free": measure_free, "follow": measure_follow, "strain": measure_st
 
 
 def worker(method: Method, measures: list[str], quick: bool, threads: int, ref_file: str | None) -> dict:
-    from taichimyxo import backend
+    from taichimyxo.runtime import backend
     backend.init("cpu", threads, default_fp="f64" if method.precision == "f64" else "f32")
     out = {"method": asdict(method), "label": method.label, "family": method.family}
     for m in measures:

@@ -26,8 +26,8 @@ import numpy as np
 from taichimyxo import backend
 backend.init("cpu", int(sys.argv[3]))
 import taichi as ti
-from taichimyxo.scene import Scene
-from taichimyxo.simulation import Simulation
+from taichimyxo.io.scene import Scene
+from taichimyxo.runtime.simulation import Simulation
 dt, steps = float(sys.argv[1]), int(sys.argv[2])
 z = np.load(sys.argv[4])
 over = {"output": {"movie": False}}

@@ -2,8 +2,8 @@
 
 Every benchmark is a script run from a clone, `python benchmarks/<name>.py [--quick] [--out DIR]`, writing into
 benchmarks-results/ in the current directory unless --out names a folder (`--out benchmarks/results` updates the
-committed results). They use only taichimyxo's public API (taichimyxo.scene, taichimyxo.simulation,
-taichimyxo.placement, taichimyxo.invariants, taichimyxo.backend).
+committed results). They use only taichimyxo's public API (taichimyxo.io.scene, taichimyxo.runtime.simulation,
+taichimyxo.physics.placement, taichimyxo.physics.invariants, taichimyxo.runtime.backend).
 """
 from __future__ import annotations
 
@@ -74,7 +74,7 @@ class Unstable(RuntimeError):
 
 def scene_for(data: dict, method: Method):
     """A scene from a partial scene dict, with the method's run settings and no movie."""
-    from taichimyxo.scene import Scene
+    from taichimyxo.io.scene import Scene
     d = json.loads(json.dumps(data))
     d.setdefault("output", {})["movie"] = False
     d.setdefault("run", {}).update(method.run_overrides())
@@ -83,7 +83,7 @@ def scene_for(data: dict, method: Method):
 
 def make(scene, method: Method, positions=None, ke=None):
     """The scene's simulation; imex with the method's contact treatment and CG tolerance."""
-    from taichimyxo.simulation import Simulation
+    from taichimyxo.runtime.simulation import Simulation
     if method.integrator == "imex":
         return Simulation.from_positions(scene, positions, ke, contacts=method.contacts,
                                          tol=method.tol)
@@ -91,9 +91,10 @@ def make(scene, method: Method, positions=None, ke=None):
 
 
 def time_steps(sim, steps: int, warm: int) -> dict:
-    """Wall time of `steps` steps after `warm` steps: taichimyxo.bench.time_steps (in the package, so the installed
+    """Wall time of `steps` steps after `warm` steps: taichimyxo.interface.bench.time_steps (in the package, so the
+    installed
     `python -m taichimyxo bench` has it too)."""
-    from taichimyxo.bench import time_steps as package_time_steps
+    from taichimyxo.interface.bench import time_steps as package_time_steps
     return package_time_steps(sim, steps, warm)
 
 
@@ -104,7 +105,7 @@ def steps(t_s: float, dt_ms: float) -> int:
 def run(sim, n: int, dt_ms: float | None = None) -> None:
     """sim.run (at dt_ms, or the scene's step); a neighbour overflow (cells blown apart) or a non-finite position
     is an instability."""
-    from taichimyxo.simulation import NeighbourOverflow
+    from taichimyxo.runtime.simulation import NeighbourOverflow
     try:
         sim.advance(n, None if dt_ms is None else dt_ms * 1e-3)
     except NeighbourOverflow as e:
@@ -114,7 +115,7 @@ def run(sim, n: int, dt_ms: float | None = None) -> None:
 
 
 def straight(centre, angle, N=8):
-    from taichimyxo.placement import straight_cell
+    from taichimyxo.physics.placement import straight_cell
     return straight_cell(np.asarray(centre, float), angle, N, L0)
 
 

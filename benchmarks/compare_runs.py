@@ -18,7 +18,7 @@ import numpy as np
 
 def frame_stats(fr, v_b: float = 4.0) -> dict:
     from taichimyxo.analysis import cell_clusters, find_aggregates
-    from taichimyxo.geometry import sample_polyline_contacts
+    from taichimyxo.physics.geometry import sample_polyline_contacts
 
     pos = fr.positions
     n = len(pos)
@@ -46,7 +46,7 @@ def frame_stats(fr, v_b: float = 4.0) -> dict:
 
 
 def last_frame(path: str):
-    from taichimyxo.trajectory import read_frames
+    from taichimyxo.io.trajectory import read_frames
     fr = None
     for fr in read_frames(path):
         pass

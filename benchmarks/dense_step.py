@@ -55,9 +55,9 @@ def _callgrind_lib():
 
 def make_sim(state: str, skin: float | None, dt_ms: float | None):
     """The Simulation of a benchmark state (benchmarks/states.py) or check state, with the skin and step given."""
-    from taichimyxo.bench import scaled_scene
-    from taichimyxo.scene import Scene
-    from taichimyxo.simulation import Simulation
+    from taichimyxo.interface.bench import scaled_scene
+    from taichimyxo.io.scene import Scene
+    from taichimyxo.runtime.simulation import Simulation
     if state in CHECK_STATES:
         scene, area, *start = check_state(state)
     elif state in ("S3 1 h", "S13 dense"):
@@ -83,7 +83,7 @@ def make_sim(state: str, skin: float | None, dt_ms: float | None):
 def profile(a) -> dict:
     import taichi as ti
 
-    from taichimyxo import backend
+    from taichimyxo.runtime import backend
     backend.init("cpu", 1)
     cg = _callgrind_lib()
     sim = make_sim(a.state, a.skin, a.dt_ms)
@@ -182,7 +182,7 @@ def run_profile(a) -> dict:
 
 
 def rebuilds(a) -> dict:
-    from taichimyxo import backend
+    from taichimyxo.runtime import backend
     backend.init("cpu", a.threads)
     sim = make_sim(a.state, a.skin, a.dt_ms)
     r0 = sim.rebuilds
@@ -197,8 +197,8 @@ def check_state(name: str):
     """(scene name, area multiple, positions, engine directions) of a forces-check state, the same whatever the code
     under test (states reached by stepping are stored the first time and reused)."""
     from states import EXACT_ROWS
-    from taichimyxo.placement import initial_configuration
-    from taichimyxo.scene import Scene
+    from taichimyxo.io.scene import Scene
+    from taichimyxo.physics.placement import initial_configuration
     if name in ("S13 start", "S11 start"):
         sc = Scene.load(name.split()[0], EXACT_ROWS)
         pos, ke = initial_configuration(sc)
@@ -210,8 +210,8 @@ def check_state(name: str):
     scene, area, steps = ("S13", 1.0, 300) if name == "S13 jam" else ("S3", 0.25, 2000)
     store = Path(tempfile.gettempdir()) / f"dense_step_{name.replace(' ', '_')}.npz"
     if not store.is_file():
-        from taichimyxo.bench import scaled_scene
-        from taichimyxo.simulation import Simulation
+        from taichimyxo.interface.bench import scaled_scene
+        from taichimyxo.runtime.simulation import Simulation
         sc = scaled_scene(scene, area, run={"integrator": "explicit", "dt_ms": 2})               # as first measured
         sim = Simulation(sc.with_overrides(EXACT_ROWS) if sc.start == "aligned" else sc)
         sim.advance(steps)
@@ -222,9 +222,9 @@ def check_state(name: str):
 
 
 def forces(a) -> None:
-    from taichimyxo import backend
-    from taichimyxo.bench import scaled_scene
-    from taichimyxo.simulation import Simulation
+    from taichimyxo.interface.bench import scaled_scene
+    from taichimyxo.runtime import backend
+    from taichimyxo.runtime.simulation import Simulation
     backend.init("cpu", a.threads)
     backend.restart_between_simulations()
     out = {}

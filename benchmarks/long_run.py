@@ -4,7 +4,7 @@ S13 is the paper's hardest default scene for the integrator: aligned start at ar
 soft contacts k_c = 0.002 N/m, flexible cells with active following. Here on a reduced periodic box (15 x 15 µm,
 90 cells, by default: 20 x 20 µm runs at ~1400 steps/s on 2 cores, 21 min for the 1.8 M steps; 15 x 15 takes
 ~13 min) at the default step. Every `--sample-s` simulated seconds the script measures, over one
-speed window (1 s), the invariants of taichimyxo.invariants (finite positions, segment lengths within +-20 % of
+speed window (1 s), the invariants of taichimyxo.physics.invariants (finite positions, segment lengths within +-20 % of
 l0, particle and cell-centre speeds, closest approach of segments of different cells, spring / bending / contact
 energies), prints one line, and at the end writes long_run.csv (into benchmarks-results/ in the current directory
 unless --out names a folder: `--out benchmarks/results` updates the committed result) and checks the bounds.
@@ -49,10 +49,10 @@ def main(argv=None) -> int:
     if args.quick:
         args.minutes = 1.0
 
-    from taichimyxo import backend
-    from taichimyxo.invariants import Bounds, InvariantMonitor
-    from taichimyxo.scene import Scene, SceneError
-    from taichimyxo.simulation import Simulation
+    from taichimyxo.io.scene import Scene, SceneError
+    from taichimyxo.physics.invariants import Bounds, InvariantMonitor
+    from taichimyxo.runtime import backend
+    from taichimyxo.runtime.simulation import Simulation
 
     over = {"domain": {"width_um": args.box, "height_um": args.box}, "output": {"movie": False},
             "run": {"hours": args.minutes / 60.0, "seed": args.seed}}

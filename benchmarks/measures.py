@@ -17,7 +17,7 @@ import time
 from benchlib import parser
 from taichimyxo.analysis.measures import measure_frames
 from taichimyxo.analysis.synthetic import write_synthetic
-from taichimyxo.trajectory import read_frames
+from taichimyxo.io.trajectory import read_frames
 
 
 def paper_scale(path: str, n_frames: int) -> str:

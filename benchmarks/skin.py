@@ -13,8 +13,8 @@ from benchlib import parser, time_steps, write_csv
 
 
 def measure(name: str, skin: float, scale: float, steps: int, warm: int) -> dict:
-    from taichimyxo.scene import Scene
-    from taichimyxo.simulation import Simulation
+    from taichimyxo.io.scene import Scene
+    from taichimyxo.runtime.simulation import Simulation
     over = {"output": {"movie": False}, "run": {"skin_um": skin}}
     if scale != 1.0:
         sc0 = Scene.load(name)
@@ -37,7 +37,7 @@ def main() -> None:
     p.add_argument("--skins", default="0.1,0.2,0.3,0.45")
     p.add_argument("--scenes", default="S3,S11")
     a = p.parse_args()
-    from taichimyxo import backend
+    from taichimyxo.runtime import backend
     backend.init("cpu")
     scale, steps = (0.5, 500) if a.quick else (1.0, 2000)
     rows = []

@@ -4,9 +4,9 @@
     python benchmarks/stability_sweep.py --sparse [--out DIR]    # explicit: sparse start against the dense jam
 
 Writes stability.csv, stability.md and stability_limits.json into the output folder (default benchmarks-results/ in
-the current directory). The limits the program enforces are package data, taichimyxo/stability_limits.json, which a
-person updates: the sweep never rewrites it; to adopt a new measurement, review it and copy
-<out>/stability_limits.json over taichimyxo/stability_limits.json. Each (integrator, k_a, k_c) runs in a worker
+the current directory). The limits the program enforces are package data, taichimyxo/physics/stability_limits.json,
+which a person updates: the sweep never rewrites it; to adopt a new measurement, review it and copy
+<out>/stability_limits.json over taichimyxo/physics/stability_limits.json. Each (integrator, k_a, k_c) runs in a worker
 process (`--worker`), two at a time on one thread each.
 """
 from __future__ import annotations
@@ -34,7 +34,7 @@ from benchlib import (
     write_csv,
 )
 
-PACKAGE_LIMITS = "taichimyxo/stability_limits.json"     # in a clone; a person copies the sweep's file here
+PACKAGE_LIMITS = "taichimyxo/physics/stability_limits.json"     # in a clone; a person copies the sweep's file here
 STAB_DT_MS = (0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 15.0, 20.0, 30.0, 50.0, 75.0, 100.0, 150.0, 200.0)
 # the paper's stiffness grid: k_a (N m) x k_c (N/m)
 K_A = (1e-18, 1e-17, 1e-16, 1e-15)
@@ -73,10 +73,10 @@ def stability_worker(integrator: str, contacts: str, k_a: float, k_c: float, dts
     push and bend), relaxed first with the explicit step at 0.5 ms for 5 s. From that state, each step size runs
     `n_steps` steps (at least 10 s simulated); stable = finite, segment lengths within +-20 % of l0, no particle faster
     than max(5 v_b, twice the fastest windowed speed of a 10 s, 0.5 ms explicit run from the same state) over the
-    last window, no segments closer than 0.3 W (taichimyxo/invariants.py)."""
-    from taichimyxo import backend
-    from taichimyxo.invariants import Bounds, measure
-    from taichimyxo.placement import initial_configuration
+    last window, no segments closer than 0.3 W (taichimyxo/physics/invariants.py)."""
+    from taichimyxo.physics.invariants import Bounds, measure
+    from taichimyxo.physics.placement import initial_configuration
+    from taichimyxo.runtime import backend
     backend.init("cpu", 1, default_fp="f32")
     relax = Method("explicit", dt_ms=0.5, precision="mixed")
     sc0 = _stab_scene(relax, k_a, k_c, config)
@@ -173,10 +173,10 @@ def default_steps(limits: dict) -> dict:
 
 
 def write_limits(out_dir, table: dict) -> Path:
-    """The measured limits and the defaults they give, as taichimyxo/stability_limits.json is laid out, into
+    """The measured limits and the defaults they give, as taichimyxo/physics/stability_limits.json is laid out, into
     <out_dir>/stability_limits.json (never the package's file). Integrators the sweep did not measure keep the
     package's current values."""
-    from taichimyxo.stability import measured_limits
+    from taichimyxo.physics.stability import measured_limits
     data = dict(measured_limits())
     data.update(table)
     data["defaults"] = default_steps(data)
@@ -208,7 +208,7 @@ def main(quick: bool = False, out_dir: str = DEFAULT_OUT) -> int:
                      "first_unstable": first_bad, "speed_bound_vb": round(res.get("v_bound", float("nan")), 2),
                      "tested_ms": " ".join(f"{float(d):g}" for d in dts_run)})
     write_csv(out / "stability.csv", rows)
-    from taichimyxo.scene import STIFFNESS_NAMES
+    from taichimyxo.io.scene import STIFFNESS_NAMES
     names = list(table)
     lines = ["# Largest stable time step (ms)", "",
              f"`python benchmarks/stability_sweep.py{' --quick' if quick else ''}` "

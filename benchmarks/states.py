@@ -19,7 +19,7 @@
   jams within that 0.6 s into real contacts everywhere, what the high-density scenes cost
   (benchmarks/results/dense_step.md). Its aligned rows hold no other count near S3's 2000 cells at that density.
 
-`load(name)` gives (scene name, area multiple, start) for taichimyxo.bench.measure: start is (positions,
+`load(name)` gives (scene name, area multiple, start) for taichimyxo.interface.bench.measure: start is (positions,
 engine_direction). `STATE_RUN[name]`: the run values a state is defined and
 measured with, where they differ from its scene's defaults (S13 itself now runs imex-explicit at 20 ms).
 """
@@ -59,8 +59,8 @@ def load(name: str):
         z = np.load(S3_1H)
         return "S3", 1.0, (z["positions"], z["engine_direction"])
     if name == "S13 dense":
-        from taichimyxo.placement import initial_configuration
-        from taichimyxo.scene import Scene
+        from taichimyxo.io.scene import Scene
+        from taichimyxo.physics.placement import initial_configuration
         return "S13", 1.0, initial_configuration(Scene.load("S13", EXACT_ROWS))
     raise SystemExit(f"states: unknown state {name!r}; known: {', '.join(STATES)}")
 
@@ -78,7 +78,7 @@ def local_area_fraction(positions: np.ndarray, box, cell_area_um2: float, radius
 
 
 def last_frame(run_dir: Path):
-    from taichimyxo.trajectory import count_frames, read_frames
+    from taichimyxo.io.trajectory import count_frames, read_frames
     gsd = next(run_dir.glob("*.gsd"))
     fr = next(read_frames(str(gsd), start=count_frames(str(gsd)) - 1))
     return fr
@@ -141,12 +141,12 @@ ROWS = (("S3 6 h", None, None, True), ("S3 start", "S3", 1.0, False), ("S3 1 h",
 
 
 def measure(steps: int, warm: int, names=None) -> list[dict]:
-    """taichimyxo.bench.measure of S3's start and of each benchmark state, in its STATE_RUN or else the scene's
-    own step and precision (Taichi initialised by the caller), with the wall time of a full 6 h paper-scale S3 at
-    each one's cost per particle-step (S3's 16 000 particles, 6 h of its steps)."""
-    from taichimyxo import backend
-    from taichimyxo.bench import measure as package_measure
-    from taichimyxo.scene import Scene
+    """taichimyxo.interface.bench.measure of S3's start and of each benchmark state, in its STATE_RUN or else the
+    scene's own step and precision (Taichi initialised by the caller), with the wall time of a full 6 h paper-scale S3
+    at each one's cost per particle-step (S3's 16 000 particles, 6 h of its steps)."""
+    from taichimyxo.interface.bench import measure as package_measure
+    from taichimyxo.io.scene import Scene
+    from taichimyxo.runtime import backend
     s3 = Scene.load("S3")
     s3_particle_steps = 6 * 3600.0 / s3.dt * s3.n_cells * s3.N
     rows = []
@@ -185,7 +185,7 @@ def main() -> None:
     if not a.measure:
         make(Path(a.runs))
         return
-    from taichimyxo import backend
+    from taichimyxo.runtime import backend
     backend.init("cpu", a.threads)
     names = [n for n in a.states.split(",") if n]
     for r in measure(a.steps, warm=100, names=names):

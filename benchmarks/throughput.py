@@ -9,8 +9,8 @@ Writes states.csv, throughput.csv (throughput_quick.csv with --quick) and a .txt
 folder
 (default benchmarks-results/ in the current directory) and prints a table. Rates, never timed asserts: these
 machines are shared and noisy; ratios within one run are what to compare. The measuring itself is the package's
-(taichimyxo/bench.py, also `python -m taichimyxo bench throughput`: S1, S3, S11 at 1x, 4x, 16x the paper's area,
-on the CPU or a GPU, with the projected wall time of a full 6 h S3).
+(taichimyxo/interface/bench.py, also `python -m taichimyxo bench throughput`: S1, S3, S11 at 1x, 4x, 16x the paper's
+area, on the CPU or a GPU, with the projected wall time of a full 6 h S3).
 """
 from __future__ import annotations
 
@@ -35,8 +35,8 @@ SCENES = [
 
 def measure(name: str, scale: float, n_steps: int, warm: int, precision: str | None = None,
             integrator: str | None = None) -> dict:
-    """One row: taichimyxo.bench.measure at `scale` times the scene's side (its area times scale^2)."""
-    from taichimyxo.bench import measure as package_measure
+    """One row: taichimyxo.interface.bench.measure at `scale` times the scene's side (its area times scale^2)."""
+    from taichimyxo.interface.bench import measure as package_measure
     run = {k: v for k, v in (("precision", precision), ("integrator", integrator)) if v}
     row = package_measure(name, scale * scale, n_steps, warm, run or None)
     row["scale"] = scale
@@ -45,7 +45,7 @@ def measure(name: str, scale: float, n_steps: int, warm: int, precision: str | N
 
 def main(quick: bool = False, out_dir: str = DEFAULT_OUT) -> list[dict]:
     from states import measure as measure_states
-    from taichimyxo import backend
+    from taichimyxo.runtime import backend
     backend.init("cpu")
     rows = []
     sizes = [1.0] if quick else [1.0, 0.5, 0.25]

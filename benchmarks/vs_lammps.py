@@ -50,7 +50,7 @@ def dense_side(n_rods: int = 2000) -> tuple[float, float]:
     """(box side in sigma, area fraction) of the dense LAMMPS variant: the rods at the area fraction cells see
     around them in S3's state after one hour (benchmarks/states.py)."""
     from states import load, local_area_fraction
-    from taichimyxo.scene import Scene
+    from taichimyxo.io.scene import Scene
     scene, _, (pos, _) = load("S3 1 h")
     sc = Scene.load(scene)
     phi = local_area_fraction(pos, sc.box, sc.length * sc.width, S3_1H_RADIUS_UM)   # the scene's area fraction's
@@ -88,9 +88,9 @@ def run_taichimyxo(name: str, steps: int, warm: int) -> dict:
     the public API (the scene's own step and precision), after `warm` steps (compilation and the first list
     builds)."""
     from states import DENSE_WARM_STEPS, STATE_RUN, STATES, load
-    from taichimyxo import backend
-    from taichimyxo.scene import Scene
-    from taichimyxo.simulation import Simulation
+    from taichimyxo.io.scene import Scene
+    from taichimyxo.runtime import backend
+    from taichimyxo.runtime.simulation import Simulation
     scene, start = name, None
     if name in STATES:
         scene, _, start = load(name)
@@ -113,7 +113,7 @@ def main() -> None:
     tools, why = lammps_tools()
     if tools is None:
         raise SystemExit(f"vs_lammps: {why}")
-    from taichimyxo import backend
+    from taichimyxo.runtime import backend
     backend.init("cpu", threads=a.threads)
     steps = 500 if a.quick else 3000
     lmp_steps = 1000 if a.quick else None

@@ -1,6 +1,6 @@
 """What the CLI's writers cost: the same stretch of steps advanced bare (`sim.advance`) and through the run loop
-with every writer a `scene` run attaches (taichimyxo.scene_run.scene_writers: invariant checks, trajectory, event
-table, movie, checkpoints, summary), alternating, on the paper-scale S3 state after one hour at its own step.
+with every writer a `scene` run attaches (taichimyxo.runtime.scene_run.scene_writers: invariant checks, trajectory,
+event table, movie, checkpoints, summary), alternating, on the paper-scale S3 state after one hour at its own step.
 
     python benchmarks/writers_cost.py [--steps 15000] [--rounds 2] [--threads 2] [--out DIR]
 
@@ -28,11 +28,11 @@ def main() -> None:
     import taichi as ti
 
     import states
-    from taichimyxo.outdir import outputs
-    from taichimyxo.run_loop import drive
-    from taichimyxo.scene import Scene
-    from taichimyxo.scene_run import scene_writers
-    from taichimyxo.simulation import Simulation, init_backend
+    from taichimyxo.io.outdir import outputs
+    from taichimyxo.io.scene import Scene
+    from taichimyxo.runtime.run_loop import drive
+    from taichimyxo.runtime.scene_run import scene_writers
+    from taichimyxo.runtime.simulation import Simulation, init_backend
     _, _, start = states.load("S3 1 h")
     scene = Scene.load("S3")
     init_backend(scene, "cpu", a.threads)

@@ -34,8 +34,8 @@ def thumbnail(src: Path, dst: Path, width: int) -> None:
 
 def main(argv=None) -> int:
     sys.path.insert(0, str(REPO))
-    from taichimyxo.catalogue import available_scenes
-    from taichimyxo.scene import Scene
+    from taichimyxo.io.catalogue import available_scenes
+    from taichimyxo.io.scene import Scene
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--only", help="comma-separated scene names (default: every scene `list` shows)")

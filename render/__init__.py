@@ -8,7 +8,7 @@
 - :class:`VideoWriter` — Frames → fragmented MP4 (H.264, yuv420p), readable while it is written, checked after
   close.
 - :func:`write_png` — one Frame → PNG figure panel (the one panel style of ``scene`` and ``render``).
-- :func:`render_trajectory` — a GSD trajectory (taichimyxo.trajectory) → MP4, without simulating.
+- :func:`render_trajectory` — a GSD trajectory (taichimyxo.io.trajectory) → MP4, without simulating.
 """
 from __future__ import annotations
 
@@ -37,7 +37,7 @@ def render_trajectory(gsd_path, out_path, color="speed", size=(1920, 1080), fps=
     strain_from: (W µm, k_c pN/µm) to colour by the strain energy computed from each frame's positions
     (Frame.with_strain) where the trajectory has none logged; without it, ValueError if
     ``color="strain"`` and the trajectory has no strain energy logged."""
-    from taichimyxo.trajectory import count_frames, read_frames
+    from taichimyxo.io.trajectory import count_frames, read_frames
 
     gsd_path, out_path = os.fspath(gsd_path), os.fspath(out_path)
     every = max(1, int(every))

@@ -13,7 +13,7 @@ import time
 
 import numpy as np
 
-from taichimyxo.frame import Frame, unwrap_chains
+from taichimyxo.io.frame import Frame, unwrap_chains
 
 from .raster import render_frame
 

@@ -1,6 +1,6 @@
 """taichimyxo: flexible-rod myxobacteria simulator on Taichi (Janulevicius et al., PLOS Comput Biol 2015).
 
-The Python API (taichimyxo.api), for notebooks and scripts:
+The Python API (taichimyxo.interface.api), for notebooks and scripts:
 
     import taichimyxo as tm
     scene = tm.load_scene("S3", set={"domain.width_um": 30, "domain.height_um": 30}, seed=2)
@@ -20,12 +20,15 @@ _os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "false")   # keep stdout fo
 
 # name -> module that defines it (imported on first use)
 _LAZY = {
-    "load_scene": "api", "Simulation": "simulation", "run": "api", "render_frame": "api", "render_movie": "api",
-    "run_scene": "api", "analyze": "api", "claims": "api", "Periodic": "triggers", "WallClock": "triggers",
-    "Frame": "frame", "Scene": "scene",
-    "SceneError": "scene", "Run": "run_loop", "drive": "run_loop", "load_sweep": "sweep", "run_sweep": "sweep",
+    "load_scene": "interface.api", "Simulation": "runtime.simulation", "run": "interface.api",
+    "render_frame": "interface.api", "render_movie": "interface.api", "run_scene": "interface.api",
+    "analyze": "interface.api", "claims": "interface.api", "Periodic": "runtime.triggers",
+    "WallClock": "runtime.triggers", "Frame": "io.frame", "Scene": "io.scene", "SceneError": "io.scene",
+    "Run": "runtime.run_loop", "drive": "runtime.run_loop", "load_sweep": "sweep", "run_sweep": "sweep",
 }
-_SUBMODULES = ("writers", "triggers", "run_loop", "api", "render", "trajectory")
+# tm.NAME -> the submodule (tm.writers, tm.api, ...)
+_SUBMODULES = {"writers": "io.writers", "triggers": "runtime.triggers", "run_loop": "runtime.run_loop",
+               "api": "interface.api", "render": "render", "trajectory": "io.trajectory"}
 
 __all__ = sorted(_LAZY) + list(_SUBMODULES)
 
@@ -35,7 +38,7 @@ def __getattr__(name):
     if name in _LAZY:
         value = getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
     elif name in _SUBMODULES:
-        value = importlib.import_module(f".{name}", __name__)
+        value = importlib.import_module(f".{_SUBMODULES[name]}", __name__)
     else:
         raise AttributeError(f"module 'taichimyxo' has no attribute {name!r}")
     globals()[name] = value

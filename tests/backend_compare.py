@@ -1,5 +1,5 @@
-"""One scene computed by two backends (an arch and a loop shape each, taichimyxo/launch.py) and compared: the code
-of the `gpu` tests (CUDA against the CPU) and of their CPU stand-in (the GPU-shaped kernels on the CPU against the
+"""One scene computed by two backends (an arch and a loop shape each, taichimyxo/runtime/launch.py) and compared: the
+code of the `gpu` tests (CUDA against the CPU) and of their CPU stand-in (the GPU-shaped kernels on the CPU against the
 CPU-shaped ones), tests/test_gpu.py.
 
 What is compared, and how closely (TOLERANCES, per precision):
@@ -43,7 +43,7 @@ class Backend:
 def start_backend(backend: Backend, precision: str) -> None:
     """Taichi on the backend's arch, no fallback, with the literals the command line uses for this precision
     (f64 for f64 scenes, f32 otherwise), 2 threads on the CPU (the tests' count)."""
-    from taichimyxo import backend as tb
+    from taichimyxo.runtime import backend as tb
     tb.init(backend.arch, int(os.environ.get("TAICHIMYXO_THREADS", "2")), fallback=False,
             default_fp="f64" if precision == "f64" else "f32")
 
@@ -56,7 +56,7 @@ def _rows(field, counts):
 def capture(scene, positions, engine_direction, backend: Backend, steps: int, forces: bool = True) -> dict:
     """What the backend computes for the scene from these positions: lists and forces at the start, then the state
     after `steps` steps. Builds, uses and closes its own Simulation."""
-    from taichimyxo.simulation import Simulation
+    from taichimyxo.runtime.simulation import Simulation
     start_backend(backend, scene.precision)
     sim = Simulation.from_positions(scene, positions, engine_direction, loop_shape=backend.loop_shape)
     try:

@@ -39,7 +39,7 @@ def fresh_taichi(request):
     compiled kernel by the ids of the fields it touches (taichi/analysis/gen_offline_cache_key.cpp), so a kernel
     compiled once, in any earlier test or run, is loaded instead of compiled again (~1-3 s instead of 10-30 s per
     Simulation): on a clean CI machine that is most of the suite's time."""
-    from taichimyxo import backend
+    from taichimyxo.runtime import backend
     keeps = request.node.get_closest_marker("keeps_taichi") is not None
     if not keeps:
         backend.reset()
@@ -54,7 +54,7 @@ def fresh_taichi(request):
 @pytest.fixture(scope="session")
 def ti_session():
     """Taichi initialised once per session on the CPU (2 threads)."""
-    from taichimyxo import backend
+    from taichimyxo.runtime import backend
     backend.init("cpu", int(os.environ["TAICHIMYXO_THREADS"]), default_fp="f64")
     return backend
 
@@ -74,7 +74,7 @@ def small_scene():
 
 @pytest.fixture
 def make_sim(ti_cpu):
-    from taichimyxo.simulation import Simulation
+    from taichimyxo.runtime.simulation import Simulation
     made = []
 
     def make(scene, positions=None, engine_direction=None):

@@ -6,9 +6,9 @@ import math
 
 import numpy as np
 
-from taichimyxo import backend
-from taichimyxo.placement import straight_cell
-from taichimyxo.scene import Scene
+from taichimyxo.io.scene import Scene
+from taichimyxo.physics.placement import straight_cell
+from taichimyxo.runtime import backend
 
 backend.init("cpu", default_fp="f64")      # f64 constants, so f64 scenes are exact to ~1e-12
 
@@ -59,7 +59,7 @@ def build_small_scene(cells: int = 2, box=(20.0, 20.0), **sections) -> Scene:
 def sim_with(positions, ke=None, box=(20.0, 20.0), **sections):
     """The scene integrator's simulation of the given chains ((N, 2) or (n, N, 2)), k_e = +1 by default. Not closed
     after the test: use the make_sim fixture for that."""
-    from taichimyxo.simulation import Simulation
+    from taichimyxo.runtime.simulation import Simulation
     pos = np.asarray(positions, float)
     if pos.ndim == 2:
         pos = pos[None]
@@ -70,9 +70,9 @@ def sim_with(positions, ke=None, box=(20.0, 20.0), **sections):
 # --------------------------------------------------------------- numpy reference energies (docs/model.md terms 1, 2, 4)
 # each lives with its term; the contact energy is written from the definition (sample to nearest point of each other
 # chain, global minimum), without the kernels' local nearest-segment rule
-from taichimyxo.terms.bending import energy as bend_energy  # noqa: E402,F401
-from taichimyxo.terms.contacts import energy as contact_energy  # noqa: E402,F401
-from taichimyxo.terms.springs import energy as spring_energy  # noqa: E402,F401
+from taichimyxo.physics.terms.bending import energy as bend_energy  # noqa: E402,F401
+from taichimyxo.physics.terms.contacts import energy as contact_energy  # noqa: E402,F401
+from taichimyxo.physics.terms.springs import energy as spring_energy  # noqa: E402,F401
 
 
 def fd_gradient(fun, pos, h=1e-6):

@@ -21,9 +21,9 @@ from taichimyxo.analysis import (
 )
 from taichimyxo.analysis.params import parameters
 from taichimyxo.analysis.summary import detected_aggregates
-from taichimyxo.cli import main as cli_main
-from taichimyxo.frame import Frame
-from taichimyxo.geometry import min_image
+from taichimyxo.interface.cli import main as cli_main
+from taichimyxo.io.frame import Frame
+from taichimyxo.physics.geometry import min_image
 
 V_B = 4.0
 
@@ -454,7 +454,7 @@ def test_first_frame_without_speeds_is_geometry_only(tmp_path):
     """A run's first frame has no speeds yet: it counts for the aggregate number, not for speeds or tracks."""
     import dataclasses
 
-    from taichimyxo.trajectory import TrajectoryWriter
+    from taichimyxo.io.trajectory import TrajectoryWriter
     disk = dict(centre=(50.0, 50.0), radius=8.25, omega=0.8)
     frames = list(synthetic_frames(box=(100.0, 100.0), n_frames=3, disks=[disk]))
     frames[0] = dataclasses.replace(frames[0], particle_speed=np.zeros_like(frames[0].particle_speed))
@@ -688,7 +688,7 @@ def test_a_cell_curled_onto_its_own_tail_is_not_free():
     speed is the straight, untouched cells' v_b, not raised by it."""
     from taichimyxo.analysis.clusters import touches_own_tail
     from taichimyxo.analysis.summary import analyze_frames
-    from taichimyxo.frame import Frame
+    from taichimyxo.io.frame import Frame
     N, W, l0 = 8, 0.5, 0.64
     straight = [np.stack([x0 + np.arange(N) * l0, np.full(N, y0)], 1) for x0, y0 in ((5, 5), (5, 25), (25, 5))]
     R, th = N * l0 / (2 * np.pi), np.arange(N) * 2 * np.pi / N     # head and tail one particle spacing apart

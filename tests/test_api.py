@@ -20,8 +20,8 @@ def readme_example() -> str:
 
 
 def test_readme_example_runs_as_written(ti_cpu, tmp_path, monkeypatch, capsys):
+    from taichimyxo.io.trajectory import read_frames
     from taichimyxo.render import verify_video
-    from taichimyxo.trajectory import read_frames
     monkeypatch.chdir(tmp_path)
     ns: dict = {}
     exec(compile(readme_example(), "README.md (Python API)", "exec"), ns)
@@ -42,15 +42,15 @@ def test_readme_example_runs_as_written(ti_cpu, tmp_path, monkeypatch, capsys):
 
 def test_import_is_light_and_names_resolve():
     code = ("import sys, taichimyxo as tm; tm.Periodic(minutes=1); tm.writers.Trajectory; tm.load_scene; "
-            "from taichimyxo.scene_run import run_scene; assert callable(tm.run) and "
-            "tm.run.__module__ == 'taichimyxo.api', tm.run; print('taichi' in sys.modules)")
+            "from taichimyxo.runtime.scene_run import run_scene; assert callable(tm.run) and "
+            "tm.run.__module__ == 'taichimyxo.interface.api', tm.run; print('taichi' in sys.modules)")
     p = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=600)
     assert p.returncode == 0, p.stderr
     assert p.stdout.strip() == "False"
 
 
 def test_triggers():
-    from taichimyxo.triggers import Periodic, WallClock, is_step_trigger
+    from taichimyxo.runtime.triggers import Periodic, WallClock, is_step_trigger
     t = Periodic(minutes=0.5).bind(0.002)
     assert t.period == 15000 and t(0) and t(30000) and not t(29999)
     assert t.next_after(0) == 15000 and t.next_after(15000) == 30000 and t.prev_before(15000) == 0
@@ -77,7 +77,7 @@ def test_load_scene_overrides():
 
 
 def _frames(path):
-    from taichimyxo.trajectory import read_frames
+    from taichimyxo.io.trajectory import read_frames
     return [(fr.step, fr.positions.copy(), fr.particle_speed.copy()) for fr in read_frames(str(path))]
 
 
@@ -111,7 +111,7 @@ def test_attached_writers_stay_open_across_runs(ti_cpu, tmp_path, small_scene):
     after it; advance(n, dt) honours dt and the simulated time follows it. tm.Simulation is the class; run takes
     keywords only, so a step count meant for advance cannot be read as seconds."""
     import taichimyxo as tm
-    from taichimyxo.simulation import Simulation
+    from taichimyxo.runtime.simulation import Simulation
     sim = tm.Simulation(small_scene(4, run={"dt_ms": 1.0}))
     try:
         assert tm.Simulation is Simulation and isinstance(sim, tm.Simulation)
@@ -135,7 +135,7 @@ def test_checkpoint_and_summary_writers(ti_cpu, tmp_path, small_scene):
     import json
 
     import taichimyxo as tm
-    from taichimyxo.writers import Checkpoint, Summary
+    from taichimyxo.io.writers import Checkpoint, Summary
     sc = small_scene(4, run={"dt_ms": 1.0})
     sim = tm.Simulation(sc)
     ck = tmp_path / "s.ckpt.npz"
@@ -157,8 +157,8 @@ def test_checkpoint_and_summary_writers(ti_cpu, tmp_path, small_scene):
 
 def test_a_misplaced_argument_to_simulation_names_the_call_that_takes_it():
     """Refused before Taichi starts, in one sentence naming the argument and the call or value to use."""
-    from taichimyxo.scene import Scene
-    from taichimyxo.simulation import Simulation
+    from taichimyxo.io.scene import Scene
+    from taichimyxo.runtime.simulation import Simulation
     sc = Scene.load("S1")
     with pytest.raises(TypeError, match=r"positions=.*Simulation\.from_positions\(scene, positions, engine_dir"):
         Simulation(sc, positions=np.zeros((1, 8, 2)), engine_direction=np.ones(1))

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from taichimyxo.scene import available_scenes
+from taichimyxo.io.scene import available_scenes
 
 REPO = Path(__file__).resolve().parent.parent
 SMALL = ["--set", "domain.width_um=20", "--set", "domain.height_um=20"]
@@ -156,8 +156,8 @@ def test_resume_with_a_checkpoint_of_other_parameters(tmp_path):
 
 # ------------------------------------------------------------------------------------------------ accepted input
 def test_step_above_the_limit_is_refused_and_accepted_with_force(out_with_files, tmp_path):
-    from taichimyxo.scene import Scene
-    from taichimyxo.stability import stable_limit_ms
+    from taichimyxo.io.scene import Scene
+    from taichimyxo.physics.stability import stable_limit_ms
     sc = Scene.load("S1", {"domain": {"width_um": 20.0, "height_um": 20.0}})
     dt = round(1.1 * stable_limit_ms(sc), 3)
     args = ["scene", "S1", "--no-movie", "--quiet", *SMALL, "--set", f"run.dt_ms={dt}", "--set", "run.hours=0.001"]

@@ -27,7 +27,7 @@ def test_benchmarks_default_to_a_results_folder_in_the_current_directory(tmp_pat
     limits it measured there too, never into the package's stability_limits.json."""
     import inspect
 
-    from taichimyxo.cli import _build_parser
+    from taichimyxo.interface.cli import _build_parser
     with pytest.raises(SystemExit):
         _build_parser().parse_args(["bench", "stability"])
     for name in ("throughput", "accuracy", "stability_sweep"):
@@ -38,7 +38,7 @@ def test_benchmarks_default_to_a_results_folder_in_the_current_directory(tmp_pat
     assert "write_limits" not in inspect.signature(sweep.main).parameters
     with pytest.raises(SystemExit):
         sweep.build_parser().parse_args(["--write-limits"])
-    package_limits = REPO / "taichimyxo" / "stability_limits.json"
+    package_limits = REPO / "taichimyxo" / "physics" / "stability_limits.json"
     before = package_limits.read_bytes()
     path = sweep.write_limits(tmp_path, {"explicit": {"1e-17/0.01": 5.0}})
     assert path == tmp_path / "stability_limits.json" and package_limits.read_bytes() == before

@@ -240,7 +240,7 @@ def test_very_rigid_without_per_frame_exponents_is_not_measurable(tmp_path):
     assert row["status"].startswith("not measurable here")
     # a record on disk, made by `figures`, its tracks stripped of their exponents
     from taichimyxo.figures.records import write_record
-    from taichimyxo.trajectory import TrajectoryWriter
+    from taichimyxo.io.trajectory import TrajectoryWriter
     path = tmp_path / "vr.gsd"
     scene = {"name": "synthetic", "guiding": {"kind": "active"}, "run": {"seed": 1},
              "cell": {"particles": 8, "width_um": 0.5, "speed_um_per_min": V_B, "k_a_N_m": 1e-15}}

@@ -8,7 +8,7 @@ import tomllib
 import pytest
 
 from simtools import cli
-from taichimyxo.scene import Scene, SceneError, available_scenes
+from taichimyxo.io.scene import Scene, SceneError, available_scenes
 
 
 def test_version():
@@ -28,7 +28,7 @@ def test_show_prints_the_resolved_scene_and_runs_nothing(tmp_path):
 
 
 def test_keys_prints_aligned_columns():
-    from taichimyxo.scene import SCHEMA
+    from taichimyxo.io.scene import SCHEMA
     p = cli("keys")
     lines = p.stdout.splitlines()
     assert len(lines) == 1 + sum(len(v) for v in SCHEMA.values())
@@ -40,7 +40,7 @@ def test_keys_prints_aligned_columns():
 
 
 def test_videos_only_accepts_every_listed_scene(tmp_path, monkeypatch):
-    from taichimyxo import videos
+    from taichimyxo.io import videos
     calls = []
     monkeypatch.setattr(videos.subprocess, "call", lambda cmd: calls.append(cmd) or 0)
     names = [n for n in available_scenes() if not n.startswith("S") or "Fig" in n or n == "S3"]

@@ -9,8 +9,8 @@ of their contact force under the old node-ownership rule):
   - a contact at a node shared by two segments counts once; sliding along a straight neighbour gives no tangential
     force (exactly, where no round cap is within reach; within 3 % of the normal force at tilts, caps included);
   - forces are minus the finite-difference gradient of the contact energy written in numpy from its definition
-    (taichimyxo.geometry.contact_energy: distance from each sample to the nearest point of each other chain), and
-    the strain energy per segment sums to that energy.
+    (taichimyxo.physics.geometry.contact_energy: distance from each sample to the nearest point of each other chain),
+    and the strain energy per segment sums to that energy.
 One Simulation per precision: configurations are loaded with set_state, so nothing recompiles.
 """
 import math
@@ -193,7 +193,7 @@ def test_contact_forces_are_minus_energy_gradient(sim64, case):
 
 def test_strain_energy_is_the_contact_energy_per_segment(small_scene, make_sim):
     """A dense aligned patch: the per-segment strain energy (S8, Fig 2F, Fig 4B) sums to the contact energy."""
-    from taichimyxo.placement import initial_configuration
+    from taichimyxo.physics.placement import initial_configuration
     sc = small_scene(0, box=(10.0, 10.0), population={"start": "aligned", "density_cells_per_cm2": 4e7},
                      output={"strain": True, "movie": False}, run={"precision": "f64"})
     pos, ke = initial_configuration(sc)
@@ -207,7 +207,7 @@ def test_strain_energy_is_the_contact_energy_per_segment(small_scene, make_sim):
     # the numpy twin a figure uses where a run did not log strain: the same energy per cell, and per segment but
     # where a sample nearest to a node presses the segment on either side of it (a tie the kernel and numpy round
     # apart: the same energy, on the neighbouring segment)
-    from taichimyxo.geometry import segment_strain
+    from taichimyxo.physics.geometry import segment_strain
     twin = segment_strain(sim.positions(), sc.box, sc.width, sc.k_c) * 1e-18
     np.testing.assert_allclose(twin.sum(1), strain.sum(1), rtol=1e-9, atol=1e-12 * strain.max())
     same = np.isclose(twin, strain, rtol=1e-9, atol=1e-12 * strain.max())

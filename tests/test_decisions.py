@@ -4,8 +4,8 @@ import json
 import pytest
 
 from taichimyxo.analysis.decisions import read_runs, readings, rigid_fraction, to_markdown
-from taichimyxo.cli import main
-from taichimyxo.scene import Scene, to_toml
+from taichimyxo.interface.cli import main
+from taichimyxo.io.scene import Scene, to_toml
 
 
 def _run(root, name, scene, over, seed, edge, in_agg, tracks=()):

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from taichimyxo.analysis.events import event_stats
-from taichimyxo.event_table import EventTable, events_path, read_events
+from taichimyxo.io.event_table import EventTable, events_path, read_events
 
 
 def test_event_table_round_trip_and_path(tmp_path):
@@ -36,9 +36,9 @@ def test_event_stats_intervals_suppression_and_links():
 def test_logged_reversals_are_the_polarity_flips_in_the_frames(tmp_path):
     import taichimyxo as tm
     from simtools import build_small_scene
-    from taichimyxo.event_log import EventLog
-    from taichimyxo.simulation import Simulation
-    from taichimyxo.trajectory import read_frames
+    from taichimyxo.io.event_log import EventLog
+    from taichimyxo.io.trajectory import read_frames
+    from taichimyxo.runtime.simulation import Simulation
     scene = build_small_scene(16, box=(25.0, 25.0), guiding={"kind": "active"}, run={"dt_ms": 2.0},
                               reversals={"enabled": True, "period_min": 0.02, "suppression": True})
     sim = Simulation(scene)

@@ -14,7 +14,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from simtools import REPO, cli, error_line
-from taichimyxo.scene import SCHEMA, Scene, SceneError
+from taichimyxo.io.scene import SCHEMA, Scene, SceneError
 
 PREVIEW = ("S1", "--preview", "--hours", "0.05", "--no-movie", "--quiet")
 
@@ -26,12 +26,12 @@ LIMITED = textwrap.dedent("""
     limit = int(sys.argv[1])
     resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
     if sys.argv[2] == "api":            # checkpoints after every chunk, so the run has one to resume from
-        from taichimyxo.api import run_scene
-        from taichimyxo.scene import Scene
+        from taichimyxo.interface.api import run_scene
+        from taichimyxo.io.scene import Scene
         sc = Scene.load("S1", {"run": {"hours": 0.05}, "output": {"movie": False}}, preview=True)
         print(run_scene(sc, out_dir=sys.argv[3], progress=False, checkpoint_every_s=0.0)["status"])
     else:
-        from taichimyxo.cli import main
+        from taichimyxo.interface.cli import main
         sys.exit(main(sys.argv[2:]))
 """)
 
@@ -77,9 +77,9 @@ def test_a_disk_that_fills_stops_the_run_in_one_line_and_resume_continues_it(tmp
 def test_resume_drops_the_frames_and_events_written_past_the_checkpoint(tmp_path):
     """A run killed (or its disk filled) after its last checkpoint wrote frames past it; --resume makes them again, so
     they go first (trajectory.trim_after), the file readable all along."""
-    from taichimyxo.event_table import events_path
-    from taichimyxo.frame import Frame
-    from taichimyxo.trajectory import TrajectoryWriter, read_frames, read_scene, trim_after
+    from taichimyxo.io.event_table import events_path
+    from taichimyxo.io.frame import Frame
+    from taichimyxo.io.trajectory import TrajectoryWriter, read_frames, read_scene, trim_after
     path = str(tmp_path / "t.gsd")
     pos = np.zeros((2, 8, 2)) + np.arange(8)[None, :, None]
     with TrajectoryWriter(path, {"scene": {"name": "t"}}) as w:
@@ -174,7 +174,7 @@ def test_any_value_of_any_key_is_kept_as_given_or_refused_naming_the_key(where, 
 @settings(max_examples=150, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
 @given(st.text(max_size=40))
 def test_a_malformed_set_argument_is_refused_in_one_line(text):
-    from taichimyxo.scene import parse_set
+    from taichimyxo.io.scene import parse_set
     try:
         over = parse_set([text])
         Scene.load("S1", over)

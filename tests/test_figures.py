@@ -20,9 +20,9 @@ from pathlib import Path
 import pytest
 
 from taichimyxo.analysis import find_aggregates, synthetic_frames, write_synthetic
-from taichimyxo.cli import main
 from taichimyxo.figures.plan import plan_figure
 from taichimyxo.figures.specs import FIGURES
+from taichimyxo.interface.cli import main
 
 V_B = 4.0
 REPO = Path(__file__).resolve().parent.parent
@@ -409,7 +409,7 @@ def test_every_panel_run_is_its_scene():
     """Each panel's run is the scene `list` names for it (the same fingerprint: physics, step, seed), so the run is
     that supplementary video at the figure's scale."""
     from taichimyxo.figures.specs import _scene_of
-    from taichimyxo.scene import Scene
+    from taichimyxo.io.scene import Scene
     for fig in FIGURES.values():
         runs = plan_figure(fig, "paper", "unused")
         for panel in fig.panels:
@@ -422,7 +422,7 @@ def test_every_panel_run_is_its_scene():
 def test_videos_render_a_finished_run_instead_of_simulating_it(tmp_path, capsys):
     """`videos --scale half --from DIR` finds a finished run of S1 at half scale below DIR and renders its movie from
     that trajectory: no simulation. A preview with a scale, or a missing folder, is one line, exit 2."""
-    from taichimyxo.videos import video_scene
+    from taichimyxo.io.videos import video_scene
     sc = video_scene("S1", scale="half")
     assert sc.name == "S1-half" and sc.box == (100.0, 100.0) and sc.n_cells == 500
     run = tmp_path / "figs" / "Fig2" / "runs" / "scene=S1_seed=1-abc"

@@ -16,10 +16,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from taichimyxo.cli import main
-from taichimyxo.frame import Frame
-from taichimyxo.scene import Scene
-from taichimyxo.trajectory import TrajectoryWriter
+from taichimyxo.interface.cli import main
+from taichimyxo.io.frame import Frame
+from taichimyxo.io.scene import Scene
+from taichimyxo.io.trajectory import TrajectoryWriter
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -42,15 +42,16 @@ def traj(tmp_path) -> Path:
 
 def stub_simulations(monkeypatch):
     """Stop the commands that simulate right after their output folder is checked."""
-    import taichimyxo.bench
-    import taichimyxo.scene_run
-    import taichimyxo.videos
+    import taichimyxo.interface.bench
+    import taichimyxo.io.videos
+    import taichimyxo.runtime.scene_run
 
     def no_scene(*a, **k):
         raise SystemExit(0)
-    monkeypatch.setattr(taichimyxo.scene_run, "find_reusable_trajectory", no_scene)   # scene: after the folder check
-    monkeypatch.setattr(taichimyxo.bench, "throughput", lambda *a, **k: None)
-    monkeypatch.setattr(taichimyxo.videos.subprocess, "call", lambda *a, **k: 0)
+    # scene: after the folder check
+    monkeypatch.setattr(taichimyxo.runtime.scene_run, "find_reusable_trajectory", no_scene)
+    monkeypatch.setattr(taichimyxo.interface.bench, "throughput", lambda *a, **k: None)
+    monkeypatch.setattr(taichimyxo.io.videos.subprocess, "call", lambda *a, **k: 0)
     import taichimyxo.sweep.orchestrator as drv
 
     class NoExecutor:
@@ -74,7 +75,7 @@ def commands(traj, sweep_file):
 
 @pytest.mark.parametrize("case", ["new folder", "existing folder", "file", "unwritable"])
 def test_every_command_takes_out_the_same_way(tmp_path, traj, case, monkeypatch, capsys):
-    import taichimyxo.outdir
+    import taichimyxo.io.outdir
     stub_simulations(monkeypatch)
     sweep_file = tmp_path / "s.toml"
     sweep_file.write_text('scene = "S1"\nhours = 0.001\nbox_um = [20, 20]\n')
@@ -88,11 +89,11 @@ def test_every_command_takes_out_the_same_way(tmp_path, traj, case, monkeypatch,
         if case == "unwritable":
             out.chmod(stat.S_IRUSR | stat.S_IXUSR)
 
-            def refuse(folder, real=taichimyxo.outdir.probe_writable):
+            def refuse(folder, real=taichimyxo.io.outdir.probe_writable):
                 if Path(folder) == out:          # root writes through modes: refuse as the kernel would
                     raise PermissionError(13, "Permission denied")
                 real(folder)
-            monkeypatch.setattr(taichimyxo.outdir, "probe_writable", refuse)
+            monkeypatch.setattr(taichimyxo.io.outdir, "probe_writable", refuse)
         try:
             rc = main([str(a) for a in argv(out)])
         except SystemExit as e:                  # the scene stub, after the folder was accepted
@@ -119,7 +120,7 @@ def test_render_out_takes_an_mp4_path_and_a_folder(tmp_path, traj, capsys):
 
 # ------------------------------------------------------------------------------------------------ progress
 def test_progress_gives_no_time_left_until_the_rate_is_measured_after_compiling():
-    from taichimyxo.status_line import Progress, starting_note
+    from taichimyxo.runtime.status_line import Progress, starting_note
     log = io.StringIO()
     bar = Progress("S3", 1000, 0.002, 0, stream=log, interval_s=0, starting=starting_note(Scene.load("S3")))
     bar.update(0, force=True)
@@ -217,7 +218,7 @@ def test_trajectory_is_readable_by_all_and_opens_in_freud_and_mdanalysis_without
             box = freud.box.Box.from_box(t[0].configuration.box)
         assert box.is2D and box.Lx == 20
         pytest.importorskip("MDAnalysis")
-        from taichimyxo.interop import universe
+        from taichimyxo.io.interop import universe
         u = universe(traj)
         times = [ts.time for ts in u.trajectory]
         assert times == [0.0, 30.0, 60.0, 90.0]                         # simulated seconds, not frame numbers

@@ -3,11 +3,11 @@ import numpy as np
 import pytest
 import taichi as ti
 
-from taichimyxo import backend
-from taichimyxo.geometry import closest_points as np_closest
+from taichimyxo.physics.geometry import closest_points as np_closest
+from taichimyxo.runtime import backend
 
 backend.init("cpu")
-from taichimyxo.terms.guiding import closest_points as ti_closest  # noqa: E402
+from taichimyxo.physics.terms.guiding import closest_points as ti_closest  # noqa: E402
 
 CASES = {
     # name: (p1, q1, p2, q2, expected distance, expected s, expected t)

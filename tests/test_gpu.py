@@ -43,7 +43,7 @@ def every_unit_scene(precision="mixed", integrator="explicit", particles=8):
 @functools.lru_cache(maxsize=2)
 def start_state(particles=8):
     """The scene's random start, placed once in numpy: both backends start from the same numbers."""
-    from taichimyxo.placement import initial_configuration
+    from taichimyxo.physics.placement import initial_configuration
     return initial_configuration(every_unit_scene(particles=particles))
 
 
@@ -94,10 +94,10 @@ def test_the_run_loop_copies_to_the_host_only_where_a_writer_fires(monkeypatch):
     import taichi as ti
     from backend_compare import start_backend
 
-    from taichimyxo.run_loop import drive
-    from taichimyxo.simulation import Simulation
-    from taichimyxo.triggers import Periodic
-    from taichimyxo.writers import Writer
+    from taichimyxo.io.writers import Writer
+    from taichimyxo.runtime.run_loop import drive
+    from taichimyxo.runtime.simulation import Simulation
+    from taichimyxo.runtime.triggers import Periodic
 
     start_backend(CPU, "mixed")
     pos, ke = start_state(LIGHT)
@@ -175,7 +175,7 @@ def test_cuda_free_cell_moves_at_v_b(cuda, precision):
     """A free straight cell moves at v_b = 4 µm/min along its axis on CUDA (tests/test_forces.py's check)."""
     from backend_compare import report, start_backend
 
-    from taichimyxo.simulation import Simulation
+    from taichimyxo.runtime.simulation import Simulation
     scene = build_small_scene(1, run={"precision": precision, "dt_ms": 1.0})
     start_backend(CUDA, precision)
     pos = cell((7.3, 11.1), 33.0)
@@ -197,7 +197,7 @@ def test_bench_throughput_measures_writes_merges_and_projects(tmp_path, capsys):
     import csv
     import json
 
-    from taichimyxo.cli import main
+    from taichimyxo.interface.cli import main
     seed = [{"scene": s, "area": 1.0, "arch": "cpu", "precision": "mixed", "integrator": "explicit",
              "particle_steps_per_s": rate} for s, rate in (("S3", 32e6), ("S11", 8e6))]
     (tmp_path / "throughput.json").write_text(json.dumps({"rows": seed}))

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from simtools import arc_cell, build_small_scene, cell, sim_with
-from taichimyxo.simulation import Simulation
+from taichimyxo.runtime.simulation import Simulation
 
 W = 0.5
 L0 = 4.5 / 7
@@ -234,7 +234,7 @@ EFFECT_FIELDS = {"g_head", "g_tail", "interacting", "rev_clock", "rev_period", "
     ("S17", {"slime", "slime_claim"}),
 ])
 def test_only_the_effects_a_scene_uses_are_allocated(name, expected):
-    from taichimyxo.scene import Scene
+    from taichimyxo.io.scene import Scene
     sc = Scene.load(name, {"domain": {"width_um": 20.0, "height_um": 20.0}, "population": {"cells": 4},
                            "output": {"movie": False}})
     sim = Simulation(sc)

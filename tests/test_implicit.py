@@ -1,4 +1,5 @@
-"""The linearly implicit step (taichimyxo/integrators/imex.py, scene run.integrator = "imex") against the explicit one.
+"""The linearly implicit step (taichimyxo/physics/integrators/imex.py, scene run.integrator = "imex") against the
+explicit one.
 
 Every comparison runs the paper's explicit step at a small step (0.5 ms) as the reference and the implicit step at
 steps 40-100 times larger. Simulations are built once per module (each compiles its kernels) and reloaded with
@@ -9,8 +10,8 @@ import numpy as np
 import pytest
 
 from simtools import arc_cell, build_small_scene, cell
-from taichimyxo.simulation import Simulation
-from taichimyxo.terms.bending import bend_angles
+from taichimyxo.physics.terms.bending import bend_angles
+from taichimyxo.runtime.simulation import Simulation
 
 # module-scoped Simulations (compiled once, states loaded per test): Taichi is not restarted between tests
 pytestmark = pytest.mark.keeps_taichi
@@ -145,7 +146,7 @@ def test_very_rigid_cells_stable_where_explicit_blows_up(rigid_pair):
     pos = np.stack([arc_cell((10.0, 10.0), 4.0, 200.0), _far()])
     ke = np.array([1, 1])
     ex.set_state(pos, ke)
-    from taichimyxo.simulation import NeighbourOverflow
+    from taichimyxo.runtime.simulation import NeighbourOverflow
     try:
         p = advance_for(ex, 0.5, 10.0)
         lengths = np.linalg.norm(np.diff(p[0], axis=0), axis=1) / L0
@@ -168,8 +169,8 @@ def test_imex_explicit_is_imex_with_explicit_contacts(pair):
     """run.integrator = "imex-explicit" (what sweeps and scene files can name) is the imex step with contacts
     explicit: no contact records, its own stability limits (30 ms at k_c = 0.002 N/m), and a push side-on that
     moves the cells as the explicit reference does; a contradicting contacts option is refused."""
-    from taichimyxo.integrators import records_contacts
-    from taichimyxo.stability import stable_limit_ms
+    from taichimyxo.physics.integrators import records_contacts
+    from taichimyxo.physics.stability import stable_limit_ms
     scene = _scene("imex-explicit", 5.0)
     assert not records_contacts(scene)
     assert stable_limit_ms(_scene("imex-explicit", 5.0, collisions={"k_c_N_per_m": 0.002})) == 30.0

@@ -78,8 +78,8 @@ def test_stop_and_resume_in_process_equals_uninterrupted(ti_cpu, tmp_path, varia
     on disk. Split: stopped after 3100 steps (inside a speed window), resumed for the remaining 4100. The two final
     checkpoints (positions, speed-window start, engine directions, reversal clocks, slime grid) and every
     trajectory frame are identical."""
-    from taichimyxo.scene_run import run_scene
-    from taichimyxo.trajectory import count_frames, read_frames
+    from taichimyxo.io.trajectory import count_frames, read_frames
+    from taichimyxo.runtime.scene_run import run_scene
     sections = dict(SCENES[variant])
     sections["run"] = {"hours": 0.002, "seed": 7, "dt_ms": 1.0, **sections.get("run", {})}     # 7200 steps
     sections["output"] = {"movie": False, "frame_interval_min": 0.02}   # a frame every 1200 steps
@@ -110,7 +110,7 @@ def test_stop_and_resume_in_process_equals_uninterrupted(ti_cpu, tmp_path, varia
     if variant != "plain":
         assert {"rev_clock", "rev_period", "rev_count", "slime"} <= a.keys()
         assert a["rev_count"].sum() > 0 and np.abs(a["slime"]).sum() > 0   # reversals and trails on the way
-    from taichimyxo.writers import SESSION_KEYS
+    from taichimyxo.io.writers import SESSION_KEYS
     for k in set(a) - set(SESSION_KEYS):              # the state; the wall-time totals differ by nature
         assert np.array_equal(a[k], b[k]), f"checkpoint field {k} differs after resume"
     assert int(a["sessions"]) == 2 and int(b["sessions"]) == 1
@@ -124,8 +124,8 @@ def test_stop_and_resume_in_process_equals_uninterrupted(ti_cpu, tmp_path, varia
 
 @needs_render
 def test_interrupted_movie_is_readable_and_resumes(ti_cpu, tmp_path):
-    from taichimyxo.scene_run import run_scene
-    from taichimyxo.trajectory import count_frames
+    from taichimyxo.io.trajectory import count_frames
+    from taichimyxo.runtime.scene_run import run_scene
     sc = build_small_scene(20, run={"hours": 0.001, "dt_ms": 1.0}, output={"movie": True, "frame_interval_min": 0.005,
                                                              "video_width": 128, "video_height": 96})
     out = tmp_path / "out"
@@ -197,7 +197,7 @@ def test_real_signal_closes_files_checkpoints_and_resumes_bit_for_bit(tmp_path, 
     assert 0 < K < 3_600_000
     ck = _ckpt(out, "S1")
     assert int(ck["step"]) == K
-    from taichimyxo.trajectory import count_frames
+    from taichimyxo.io.trajectory import count_frames
     n = count_frames(str(out / "S1.gsd"))
     assert n == K // 1200 + 1                                  # frames at 0, 1200, ... up to K
     if verify_video is not None:

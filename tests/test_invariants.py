@@ -24,15 +24,15 @@ def test_forced_garbage_stops_naming_the_invariant_and_keeps_the_files(tmp_path)
     d = json.loads((out / "S1.json").read_text())
     assert d["status"] == "failed" and not d["completed"] and "segment lengths" in d["invariant_broken"]
     assert f"stopped at step {d['steps']} " in line
-    from taichimyxo.trajectory import count_frames, read_frames
+    from taichimyxo.io.trajectory import count_frames, read_frames
     n = count_frames(str(out / "S1.gsd"))
     assert n >= 1 and all(np.isfinite(f.positions).all() for f in read_frames(str(out / "S1.gsd")))
     assert int(np.load(out / "S1.ckpt.npz")["step"]) == d["steps"]
 
 
 def test_invariant_checks_name_what_broke():
-    from taichimyxo.frame import Frame
-    from taichimyxo.writers import check_frame
+    from taichimyxo.io.frame import Frame
+    from taichimyxo.io.writers import check_frame
     sc = build_small_scene(1)
     pos = np.zeros((1, sc.N, 2))
     pos[0, :, 0] = np.arange(sc.N) * sc.rest_length
@@ -55,7 +55,7 @@ def test_particle_speed_bound_allows_the_largest_force_one_particle_can_take():
     (37 v_b); the cell centre bound stays 5 v_b."""
     import pytest
 
-    from taichimyxo.invariants import Bounds
+    from taichimyxo.physics.invariants import Bounds
     plain = build_small_scene(2)
     guided = build_small_scene(2, guiding={"kind": "active"})
     per_force = 1.0 / (plain.zeta_n * plain.v_b)

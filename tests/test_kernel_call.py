@@ -1,13 +1,13 @@
-"""Kernels launched directly (taichimyxo/kernel_call.py) run the same compiled code as Taichi's own call: the same
-trajectory bit for bit, the same return values; a kernel outside the direct call's shape keeps Taichi's call."""
+"""Kernels launched directly (taichimyxo/runtime/kernel_call.py) run the same compiled code as Taichi's own call: the
+same trajectory bit for bit, the same return values; a kernel outside the direct call's shape keeps Taichi's call."""
 
 import numpy as np
 import pytest
 import taichi as ti
 
 from simtools import build_small_scene, cell
-from taichimyxo.kernel_call import direct
-from taichimyxo.simulation import Simulation
+from taichimyxo.runtime.kernel_call import direct
+from taichimyxo.runtime.simulation import Simulation
 
 pytestmark = pytest.mark.keeps_taichi
 

@@ -25,7 +25,7 @@ from taichimyxo.analysis.synthetic_measures import (
     sample_grid,
     walkers,
 )
-from taichimyxo.geometry import min_image
+from taichimyxo.physics.geometry import min_image
 
 BOX = np.array([100.0, 100.0])
 
@@ -199,7 +199,7 @@ def _small_run(tmp_path, velocity=True, n_frames=5):
 
 def test_analyze_with_measures_writes_them_and_their_figures(tmp_path):
     from taichimyxo.analysis import format_summary
-    from taichimyxo.api import analyze
+    from taichimyxo.interface.api import analyze
     s = analyze(_small_run(tmp_path), out_dir=str(tmp_path / "out"), measures=True)
     ms = s["measures"]
     assert len(ms["defects"]["n_plus_half"]) == 5 and ms["cluster_sizes"]["alpha"] is not None
@@ -213,7 +213,7 @@ def test_analyze_with_measures_writes_them_and_their_figures(tmp_path):
 
 def test_measures_without_velocities_skip_only_the_velocity_correlation(tmp_path):
     from taichimyxo.analysis.measures import measure_frames
-    from taichimyxo.trajectory import read_frames
+    from taichimyxo.io.trajectory import read_frames
     ms = measure_frames(read_frames(_small_run(tmp_path, velocity=False, n_frames=4)), n_boot=0)
     assert ms["velocity_correlation"] is None and ms["orientation_correlation"] is not None
     assert ms["skipped"][0].startswith("velocity correlation: needs particle velocities")
@@ -223,8 +223,8 @@ def test_measures_without_velocities_skip_only_the_velocity_correlation(tmp_path
 def test_cli_measures_with_a_smoothing_length_and_its_events_table(tmp_path, capsys):
     import json
 
-    from taichimyxo.cli import main as cli_main
-    from taichimyxo.event_table import EventTable
+    from taichimyxo.interface.cli import main as cli_main
+    from taichimyxo.io.event_table import EventTable
     path = _small_run(tmp_path, n_frames=3)
     t = EventTable(path)
     t.add([30.0, 90.0, 150.0], [1, 2, 3], [4, 4, 4], "reversal")

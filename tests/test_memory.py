@@ -1,13 +1,13 @@
 """Memory: a domain too large for this machine, or for Taichi's indices, is refused in one line before anything is
-allocated or written; taichimyxo.resources' estimate names its parts (fields, neighbour list, slime grid) and compares
-their sum with the memory available; and the field sizes it estimates are exactly what a Simulation allocates, for
-every combination of effects, integrator, mass and precision."""
+allocated or written; taichimyxo.runtime.resources' estimate names its parts (fields, neighbour list, slime grid) and
+compares their sum with the memory available; and the field sizes it estimates are exactly what a Simulation allocates,
+for every combination of effects, integrator, mass and precision."""
 from __future__ import annotations
 
 import pytest
 
 from simtools import build_small_scene, cli, error_line
-from taichimyxo.scene import SceneError
+from taichimyxo.io.scene import SceneError
 
 
 def test_a_domain_beyond_memory_is_refused_in_one_line(tmp_path):
@@ -20,7 +20,7 @@ def test_a_domain_beyond_memory_is_refused_in_one_line(tmp_path):
 
 
 def test_memory_estimate_names_the_parts_and_compares_with_what_is_available():
-    from taichimyxo.resources import check_resources, estimate
+    from taichimyxo.runtime.resources import check_resources, estimate
     sc = build_small_scene(0, box=(2000.0, 2000.0), slime={"enabled": True})
     est = estimate(sc)
     assert est["total"] > est["fields"] > est["neighbour_list"] > 0 and est["slime_grid"] > 0
@@ -38,7 +38,7 @@ def test_memory_estimate_names_the_parts_and_compares_with_what_is_available():
     {"run": {"mass_pg": 1.0, "precision": "f32"}},
 ], ids=["plain", "adhesion-strain", "reversals-slime", "imex", "mass-f32"])
 def test_field_estimate_matches_what_the_simulation_allocates(make_sim, over):
-    from taichimyxo.resources import field_sizes
+    from taichimyxo.runtime.resources import field_sizes
     sc = build_small_scene(4, **over)
     sim = make_sim(sc)
     allocated = sim.allocated_fields()

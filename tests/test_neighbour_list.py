@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from simtools import build_small_scene
-from taichimyxo.geometry import min_image
-from taichimyxo.simulation import Simulation
+from taichimyxo.physics.geometry import min_image
+from taichimyxo.runtime.simulation import Simulation
 
 F64 = {"precision": "f64"}
 

@@ -22,9 +22,9 @@ import numpy as np
 import pytest
 
 from simtools import error_line
-from taichimyxo.frame import Frame
-from taichimyxo.scene import Scene
-from taichimyxo.trajectory import TrajectoryWriter
+from taichimyxo.io.frame import Frame
+from taichimyxo.io.scene import Scene
+from taichimyxo.io.trajectory import TrajectoryWriter
 
 REPO = Path(__file__).resolve().parent.parent
 SETS = {"domain": {"width_um": 20.0, "height_um": 20.0}, "run": {"dt_ms": 2.0}}      # 600 steps: 1.2 s
@@ -53,8 +53,8 @@ def write_trajectory(path: Path, frames: int = 3) -> None:
 
 
 def lay_out(out: Path, ending: str) -> dict:
-    """The files `ending` leaves in `out` (taichimyxo.scene_run's outputs; the summary as writers.Summary writes it);
-    returns their bytes."""
+    """The files `ending` leaves in `out` (taichimyxo.runtime.scene_run's outputs; the summary as writers.Summary writes
+    it); returns their bytes."""
     sc = scene()
     out.mkdir(parents=True)
     write_trajectory(out / "S1.gsd")
@@ -145,7 +145,7 @@ def test_resume_and_overwrite_together_and_resume_of_nothing(tmp_path):
 
 
 def test_the_checks_read_what_each_ending_leaves():
-    from taichimyxo.outdir import plan_run
+    from taichimyxo.io.outdir import plan_run
     sc = scene()
 
     def plan(tmp, ending, **kw):
@@ -173,7 +173,7 @@ run.dt_ms = [1, 2]
 
 
 def test_a_sweep_with_unfinished_runs_is_refused_until_told(tmp_path, capsys):
-    from taichimyxo.cli import main
+    from taichimyxo.interface.cli import main
     from taichimyxo.sweep import plan
     from taichimyxo.sweep.orchestrator import check_earlier_runs
     from taichimyxo.sweep.rundir import prepare, state
@@ -201,7 +201,7 @@ def test_a_sweep_with_unfinished_runs_is_refused_until_told(tmp_path, capsys):
 # ------------------------------------------------------------------------------------------------ a real run
 @pytest.mark.slow
 def test_interrupted_then_resumed_then_complete_then_overwritten(ti_cpu, tmp_path):
-    from taichimyxo.scene_run import run_scene
+    from taichimyxo.runtime.scene_run import run_scene
     out = tmp_path / "out"
     sc = scene()
     part = run_scene(sc, out_dir=str(out), stop_after_steps=700, progress=False)
@@ -231,7 +231,7 @@ SMALL = ["--set", "domain.width_um=20", "--set", "domain.height_um=20"]
 
 
 def test_resume_with_fewer_hours_than_done_is_refused_and_keeps_the_checkpoint(ti_cpu, tmp_path):
-    from taichimyxo.scene_run import run_scene
+    from taichimyxo.runtime.scene_run import run_scene
     sc = Scene.load("S1", {"domain": {"width_um": 20.0, "height_um": 20.0}, "run": {"dt_ms": 1.0, "hours": 0.01},
                            "output": {"movie": False}})
     out = tmp_path / "out"

@@ -1,13 +1,13 @@
-"""Initial configurations (taichimyxo/placement.py): density, no overlaps, area fraction, spiral head to tail, the
-batched random placement, and what a start that cannot place its cells says."""
+"""Initial configurations (taichimyxo/physics/placement.py): density, no overlaps, area fraction, spiral head to tail,
+the batched random placement, and what a start that cannot place its cells says."""
 
 import numpy as np
 import pytest
 
 from simtools import build_small_scene, cli, error_line
-from taichimyxo.geometry import closest_points, min_image, sample_polyline_contacts
-from taichimyxo.placement import initial_configuration
-from taichimyxo.scene import Scene, defaults
+from taichimyxo.io.scene import Scene, defaults
+from taichimyxo.physics.geometry import closest_points, min_image, sample_polyline_contacts
+from taichimyxo.physics.placement import initial_configuration
 
 
 def test_random_start_has_the_density_and_no_overlaps():
@@ -136,9 +136,9 @@ def _one_try_at_a_time(scene):
     batched placement must reproduce exactly)."""
     import math
 
-    from taichimyxo import rng
-    from taichimyxo.geometry import closest_points, min_image
-    from taichimyxo.placement import straight_cell
+    from taichimyxo.physics import rng
+    from taichimyxo.physics.geometry import closest_points, min_image
+    from taichimyxo.physics.placement import straight_cell
     n, N, l0, W = scene.n_cells, scene.N, scene.rest_length, scene.width
     box = np.array(scene.box)
     draws = rng.Stream(scene.seed, rng.STREAM_PLACE)
@@ -162,14 +162,14 @@ def _one_try_at_a_time(scene):
 
 @pytest.mark.parametrize("box,cells,seed", [(30.0, 60, 2), (40.0, 200, 7), (12.0, 3, 5)])
 def test_batched_random_placement_places_the_same_cells(box, cells, seed):
-    from taichimyxo.placement import random_start
+    from taichimyxo.physics.placement import random_start
     sc = build_small_scene(cells, box=(box, box), run={"seed": seed})
     assert np.array_equal(random_start(sc)[0], _one_try_at_a_time(sc))
 
 
 def test_random_placement_gives_up_within_its_budget():
     """0.6 of the area cannot be placed at random: the placement stops after its budget of tries, not never."""
-    from taichimyxo.placement import PlacementError, random_start
+    from taichimyxo.physics.placement import PlacementError, random_start
     sc = unvalidated_scene(30.0, 216)                                   # area fraction 0.6
     seen = []
     with pytest.raises(PlacementError, match="gave up after 20800 tries"):

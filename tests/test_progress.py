@@ -12,7 +12,7 @@ from simtools import build_small_scene
 
 
 def test_progress_is_one_plain_line_per_interval_off_a_terminal():
-    from taichimyxo.status_line import Progress, duration
+    from taichimyxo.runtime.status_line import Progress, duration
     assert [duration(s) for s in (3.61, 65, 3900, 6 * 3600)] == ["3.6 s", "1 min 05 s", "1 h 05 min", "6 h 00 min"]
     log = io.StringIO()
     bar = Progress("S3", total_steps=10_800_000, dt=0.002, start_step=0, stream=log, interval_s=3600)
@@ -37,8 +37,8 @@ def test_progress_is_one_plain_line_per_interval_off_a_terminal():
 
 
 def test_summary_after_resume_pairs_this_sessions_steps_with_its_wall_time(ti_cpu, tmp_path, capsys):
-    from taichimyxo.cli import _print_summary
-    from taichimyxo.scene_run import run_scene
+    from taichimyxo.interface.cli import _print_summary
+    from taichimyxo.runtime.scene_run import run_scene
     sc = build_small_scene(4, run={"hours": 0.001, "dt_ms": 1.0})               # 3600 steps
     out = tmp_path / "out"
     first = run_scene(sc, out_dir=out, stop_after_steps=1000, progress=False)
@@ -60,7 +60,7 @@ def test_a_session_killed_before_its_summary_still_counts_its_wall_time(ti_cpu, 
     still count that session's time."""
     import numpy as np
 
-    from taichimyxo.scene_run import run_scene
+    from taichimyxo.runtime.scene_run import run_scene
     sc = build_small_scene(4, run={"hours": 0.001, "dt_ms": 1.0})               # 3600 steps
     out = tmp_path / "out"
     first = run_scene(sc, out_dir=out, stop_after_steps=1000, progress=False)
@@ -78,8 +78,8 @@ def test_a_session_killed_before_its_summary_still_counts_its_wall_time(ti_cpu, 
 
 def test_summary_splits_the_wall_time_by_simulated_hour_over_sessions(make_sim, tmp_path):
     """wall_seconds_by_hour: the wall time each simulated hour cost, added over the sessions of a resumed run."""
-    from taichimyxo.run_loop import drive
-    from taichimyxo.writers import Summary
+    from taichimyxo.io.writers import Summary
+    from taichimyxo.runtime.run_loop import drive
     sim = make_sim(build_small_scene(4, run={"hours": 0.001, "dt_ms": 1.0}))
     sim.set_state(sim.state.positions(), sim.state.ke.to_numpy(), step=3_599_000)      # 1 s before hour 1
     path = tmp_path / "s.json"
@@ -99,8 +99,8 @@ def test_a_checkpoint_resumed_through_the_api_carries_its_sessions(make_sim, tmp
     still counts the earlier sessions: the totals come from the checkpoint the simulation was loaded from."""
     import numpy as np
 
-    from taichimyxo.run_loop import drive
-    from taichimyxo.writers import Checkpoint, Summary, read_checkpoint
+    from taichimyxo.io.writers import Checkpoint, Summary, read_checkpoint
+    from taichimyxo.runtime.run_loop import drive
     sc = build_small_scene(4, run={"hours": 0.001, "dt_ms": 1.0})
     sim = make_sim(sc)
     path = tmp_path / "run.ckpt.npz"

@@ -5,7 +5,7 @@ import matplotlib
 import numpy as np
 import pytest
 
-from taichimyxo.frame import Frame
+from taichimyxo.io.frame import Frame
 from taichimyxo.render import (
     Renderer,
     VideoWriteError,
@@ -275,7 +275,7 @@ def test_write_png_is_the_rendered_image(tmp_path):
 def test_render_trajectory_equals_render_frame(tmp_path):
     import imageio.v3 as iio
 
-    from taichimyxo.trajectory import TrajectoryWriter, read_frames
+    from taichimyxo.io.trajectory import TrajectoryWriter, read_frames
 
     # positions on a 1/64 µm grid, float32 speeds and strain: the GSD round trip is exact
     frames = _frames(3)

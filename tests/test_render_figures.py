@@ -9,7 +9,7 @@ import matplotlib
 import numpy as np
 import pytest
 
-from taichimyxo.frame import Frame
+from taichimyxo.io.frame import Frame
 from taichimyxo.render import (
     PNG_SIZE,
     VideoWriter,
@@ -306,7 +306,7 @@ def test_scene_panel_and_render_panel_are_the_same(tmp_path):
     trajectory with write_png through render_trajectory: same function, size and labels."""
     import imageio.v3 as iio
 
-    from taichimyxo.trajectory import TrajectoryWriter
+    from taichimyxo.io.trajectory import TrajectoryWriter
 
     frames = _moving_frames(3, box=(40.0, 40.0))
     for fr in frames:
@@ -330,8 +330,8 @@ def test_scene_panel_and_render_panel_are_the_same(tmp_path):
 
 
 def test_render_trajectory_new_colourings_and_cli(tmp_path, capsys):
-    from taichimyxo.cli import main
-    from taichimyxo.trajectory import TrajectoryWriter
+    from taichimyxo.interface.cli import main
+    from taichimyxo.io.trajectory import TrajectoryWriter
 
     gsd = tmp_path / "T.gsd"
     with TrajectoryWriter(str(gsd), {"scene": {"name": "T"}, "cell": {"particles": 8}}) as tw:
@@ -352,7 +352,7 @@ def test_render_trajectory_new_colourings_and_cli(tmp_path, capsys):
 
 
 def test_scene_accepts_the_new_colourings():
-    from taichimyxo.scene import Scene, SceneError
+    from taichimyxo.io.scene import Scene, SceneError
 
     for color in ["speed", "strain", "identity", "polarity", "orientation"]:
         sc = Scene.from_dict({"output": {"color": color}}, where="test")
@@ -364,7 +364,7 @@ def test_scene_accepts_the_new_colourings():
 def test_scene_colour_range_keys():
     """output.color_min / color_max set the movie's range from a scene (render has --vmin / --vmax); refused where
     a colouring has no range, or the range is empty."""
-    from taichimyxo.scene import Scene, SceneError
+    from taichimyxo.io.scene import Scene, SceneError
 
     def sc(**out):
         return Scene.from_dict({"domain": {"width_um": 20.0, "height_um": 20.0}, "population": {"cells": 2},

@@ -1,5 +1,5 @@
-"""Rollback (taichimyxo/run_loop.py, docs/model.md "Numerics"): a chunk that breaks an invariant is redone from the
-in-memory copy taken before it, with each scene step split into 2 (then 4, 8) steps; the scene's step resumes after.
+"""Rollback (taichimyxo/runtime/run_loop.py, docs/model.md "Numerics"): a chunk that breaks an invariant is redone from
+the in-memory copy taken before it, with each scene step split into 2 (then 4, 8) steps; the scene's step resumes after.
 
 Forced breaches: two overlapping cells pushed apart at 20 ms, beyond the explicit stability limit (the checker's own
 case in test_stability.py), recover; at 400 ms even an eighth of the step breaks, so the run stops there with the
@@ -17,8 +17,8 @@ import sys
 import numpy as np
 
 from simtools import L0, cell
-from taichimyxo.run_loop import MAX_SPLIT, drive
-from taichimyxo.writers import InvariantCheck, check_positions, read_checkpoint, write_checkpoint
+from taichimyxo.io.writers import InvariantCheck, check_positions, read_checkpoint, write_checkpoint
+from taichimyxo.runtime.run_loop import MAX_SPLIT, drive
 
 N = 8
 

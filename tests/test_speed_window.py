@@ -7,8 +7,8 @@ import numpy as np
 def test_displayed_speed_window_opens_at_the_previous_frame_when_frames_are_closer(tmp_path):
     """Frames every 3 s with a 10 s speed window: the window opens at the previous frame (so the speed is over the
     last 3 s), not at step 0 (the old behaviour: the net displacement since the start)."""
-    from taichimyxo.scene import Scene
-    from taichimyxo.scene_run import run_scene
+    from taichimyxo.io.scene import Scene
+    from taichimyxo.runtime.scene_run import run_scene
     sc = Scene.from_dict({"scene": {"name": "win"}, "domain": {"width_um": 20.0, "height_um": 20.0},
                           "population": {"cells": 1},
                           "run": {"hours": 0.01, "dt_ms": 2.0, "speed_window_s": 10.0},

@@ -1,7 +1,7 @@
 """Hard cases stay numerically stable at the scene's default step.
 
 Every case runs the explicit integrator at the default step (scene.dt) and asserts, through
-taichimyxo.invariants.check_invariants after every window of 1 simulated second (the displayed-speed window):
+taichimyxo.physics.invariants.check_invariants after every window of 1 simulated second (the displayed-speed window):
 finite positions; segment lengths within +-20 % of l0; windowed cell-centre speed <= 5 v_b and particle speed
 <= 5 v_b (in scenes with guiding or slime, 5 v_b + F_max / (zeta_n v_b) = 37 v_b for particles: one-particle pulls
 swing heads faster, and test_particles_faster_than_5_vb_are_physical shows that is the model, not the step);
@@ -19,7 +19,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from simtools import arc_cell, build_small_scene, cell, ring_radius_for_gap
-from taichimyxo.invariants import Bounds, InvariantMonitor, check_invariants, measure
+from taichimyxo.physics.invariants import Bounds, InvariantMonitor, check_invariants, measure
 
 STIFFNESS = {"very flexible": 1e-18, "flexible": 1e-17, "rigid": 1e-16, "very rigid": 1e-15}
 N = 8
@@ -57,7 +57,7 @@ def test_checker_catches_an_unstable_step(small_scene, make_sim):
     invariants: the checker is not vacuous."""
     sc = small_scene(2, run={"dt_ms": 20.0})
     sim = make_sim(sc, np.stack([cell((10, 10), 0.0, N, L0), cell((10, 10.15), math.degrees(0.1), N, L0)]), _ke(1, -1))
-    from taichimyxo.simulation import NeighbourOverflow
+    from taichimyxo.runtime.simulation import NeighbourOverflow
     # the invariant check, or the list build's segment-length check (the same invariant) when a build comes first
     with pytest.raises((AssertionError, NeighbourOverflow), match="violation|non-finite|segment lengths"):
         check_invariants(sim, 200, window_steps=50)
@@ -103,7 +103,7 @@ def test_high_density_aligned_soft_contacts(small_scene, make_sim, k_a, guiding)
 
 
 def _head_tail_gap(pos, follower=1, leader=0):
-    from taichimyxo.geometry import closest_points
+    from taichimyxo.physics.geometry import closest_points
     return float(closest_points(pos[follower, 0], pos[follower, 1], pos[leader, -2], pos[leader, -1])[4]) - W
 
 
@@ -228,7 +228,7 @@ def test_hairpin_self_contact_of_segments_k_and_k_plus_2(small_scene, make_sim):
     sc = small_scene(1)
     pos = cell((10.0, 10.0), 0.0, N, L0)
     pos[0] = pos[1] + L0 * np.array([math.cos(math.radians(10)), math.sin(math.radians(10))])
-    from taichimyxo.geometry import closest_points
+    from taichimyxo.physics.geometry import closest_points
     assert closest_points(pos[0], pos[1], pos[2], pos[3])[4] < 0.25 * W
     sim = make_sim(sc, pos[None], _ke(1))
     assert np.abs(sim.forces()["contact"]).sum() > 0
@@ -346,8 +346,8 @@ def test_random_small_configurations_stay_bounded(sim_cache, n, stiffness, k_c, 
     """2-6 cells placed at random without overlap on a 10 x 10 µm box (crowd) or 12 x 12 µm, any paper stiffness,
     either k_c and any guiding kind: 1000 steps at the default step keep every invariant. One Simulation per
     compile-time configuration; new positions are loaded with set_state."""
-    from taichimyxo.placement import random_start
-    from taichimyxo.simulation import Simulation
+    from taichimyxo.physics.placement import random_start
+    from taichimyxo.runtime.simulation import Simulation
     box = 10.0 if crowd else 12.0
     sc = build_small_scene(n, box=(box, box), cell={"k_a_N_m": STIFFNESS[stiffness]},
                            collisions={"k_c_N_per_m": k_c}, guiding={"kind": guiding}, run={"seed": seed})

@@ -1,6 +1,6 @@
-"""The step-size controller, run.step_control = "error" (taichimyxo/integrators/step_control.py): the rule, a free
-cell at the longest step with its clock exact, a guiding pull's onset that shortens the steps, reversal clocks in scene
-steps, and the combinations refused at load. 1 and 2 threads (test_threads.py) and --resume (test_interrupt.py)
+"""The step-size controller, run.step_control = "error" (taichimyxo/physics/integrators/step_control.py): the rule, a
+free cell at the longest step with its clock exact, a guiding pull's onset that shortens the steps, reversal clocks in
+scene steps, and the combinations refused at load. 1 and 2 threads (test_threads.py) and --resume (test_interrupt.py)
 are tested with the other effects."""
 import math
 
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from simtools import build_small_scene, cell
-from taichimyxo.integrators.step_control import RATIO_SCALE, StepControl
-from taichimyxo.scene import SceneError
+from taichimyxo.io.scene import SceneError
+from taichimyxo.physics.integrators.step_control import RATIO_SCALE, StepControl
 
 CONTROL = {"step_control": "error", "dt_ms": 2.0, "step_max_multiple": 3}
 
@@ -96,7 +96,7 @@ def test_reversal_clocks_count_scene_steps(make_sim):
 def test_refused_combinations():
     with pytest.raises(SceneError, match="explicit"):
         build_small_scene(1, run={"step_control": "error", "integrator": "imex"})
-    from taichimyxo.stability import check_step, stable_limit_ms
+    from taichimyxo.physics.stability import check_step, stable_limit_ms
     sc = build_small_scene(1, run={**CONTROL, "step_max_multiple": 64})
     assert sc.longest_step * 1e3 > stable_limit_ms(sc)
     with pytest.raises(SceneError, match="step_max_multiple"):

@@ -18,8 +18,8 @@ from pathlib import Path
 
 import pytest
 
-from taichimyxo.cli import main
-from taichimyxo.scene import Scene
+from taichimyxo.interface.cli import main
+from taichimyxo.io.scene import Scene
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -241,7 +241,7 @@ def test_progress_counts_runs_and_estimates_the_time_left():
 
 # ------------------------------------------------------------------------------------------------ videos --jobs
 def test_videos_in_parallel_go_through_the_executor_and_s8_waits_for_s3s_trajectory(tmp_path, monkeypatch):
-    from taichimyxo import videos
+    from taichimyxo.io import videos
     from taichimyxo.sweep import orchestrator as driver
     waves = []
 
@@ -390,7 +390,7 @@ def test_a_run_another_process_is_running_is_left_to_it(tmp_path, capsys):
 def test_a_failing_point_fails_alone_and_an_interrupted_one_resumes(tmp_path, capsys):
     """run.dt_ms = 100 (force: past the stability limit) breaks an invariant at its first frame; the dt = 1 point
     was interrupted after 1000 steps before the sweep and resumes from its checkpoint."""
-    from taichimyxo.scene_run import run_scene
+    from taichimyxo.runtime.scene_run import run_scene
     from taichimyxo.sweep import plan
     from taichimyxo.sweep.rundir import prepare
     f = sweep_file(tmp_path, "run.dt_ms = [1, 100]", "force = true")
@@ -459,7 +459,7 @@ def test_ctrl_c_keeps_finished_runs_and_checkpoints_the_running_ones(tmp_path):
 def test_a_key_added_later_leaves_earlier_runs_keys_at_its_neutral_value():
     """schema.ADDED_KEYS: at the value that reproduces the behaviour before it, a new key is not in the trajectory
     hash (a run, a sweep point or a checkpoint made before it keeps its key); at any other value it is."""
-    from taichimyxo.schema import ADDED_KEYS, SCHEMA
+    from taichimyxo.io.schema import ADDED_KEYS, SCHEMA
     from taichimyxo.sweep.spec import scene_key
     base = Scene.load("S15")
     for dotted, before in ADDED_KEYS.items():

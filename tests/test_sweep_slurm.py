@@ -94,7 +94,7 @@ def slurm_cluster():
 
 
 def frames_in(run_dir) -> int:
-    from taichimyxo.trajectory import count_frames
+    from taichimyxo.io.trajectory import count_frames
     try:
         return count_frames(str(next(run_dir.glob("*.gsd"))))
     except Exception:           # noqa: BLE001 - not there yet, or being written: look again
@@ -159,10 +159,10 @@ class Pauser(threading.Thread):
 
 @pytest.mark.slow
 def test_sweep_on_slurm_requeues_a_run_at_its_time_limit_and_resumes_it(slurm_cluster, tmp_path):
+    from taichimyxo.io.trajectory import read_frames
     from taichimyxo.sweep import run_sweep
     from taichimyxo.sweep.slurm import SLURM_RECORD, restarts
     from taichimyxo.sweep.slurm_job import read_attempts
-    from taichimyxo.trajectory import read_frames
 
     path = tmp_path / "slurm-test.toml"
     path.write_text(SWEEP)
@@ -231,7 +231,7 @@ def test_time_limit_warning_stops_the_simulation_with_a_checkpoint(ti_cpu, tmp_p
     """SIGUSR2 (Slurm's warning before the time limit) under TimeLimitStop: the run stops as on Ctrl-C, checkpoint
     written, also when the warning comes before the simulation started (here: before run_scene is called)."""
     pytest.importorskip("submitit")
-    from taichimyxo.scene_run import run_scene
+    from taichimyxo.runtime.scene_run import run_scene
     from taichimyxo.sweep.slurm_job import TimeLimitStop
     sc = small_scene(20, run={"hours": 0.01, "dt_ms": 2.0}, output={"frame_interval_min": 0.02})   # 18000 steps
     before = signal.getsignal(signal.SIGUSR2)
@@ -246,7 +246,7 @@ def test_time_limit_warning_stops_the_simulation_with_a_checkpoint(ti_cpu, tmp_p
 
 def test_bad_slurm_options_are_one_line(capsys, tmp_path):
     pytest.importorskip("submitit")
-    from taichimyxo.cli import main
+    from taichimyxo.interface.cli import main
     from taichimyxo.sweep.slurm import check_options
     from taichimyxo.sweep.spec import SweepError
     for bad, says in (({"mem_gb": -1}, "[slurm] mem_gb = -1: expected a number > 0"),

@@ -11,8 +11,8 @@ RUN = r"""
 import numpy as np, sys
 from taichimyxo import backend
 backend.init("cpu", threads=int(sys.argv[1]))
-from taichimyxo.scene import Scene
-from taichimyxo.simulation import Simulation
+from taichimyxo.io.scene import Scene
+from taichimyxo.runtime.simulation import Simulation
 sc = Scene.from_dict({"domain": {"width_um": 40.0, "height_um": 40.0}, "population": {"cells": 120},
                       "guiding": {"kind": sys.argv[3]}, "reversals": {"enabled": True, "period_min": 0.05},
                       "slime": {"enabled": sys.argv[3] == "none"}, "run": {"step_control": sys.argv[4]}})

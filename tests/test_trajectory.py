@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from simtools import build_small_scene
-from taichimyxo.frame import Frame
-from taichimyxo.trajectory import TrajectoryWriter
+from taichimyxo.io.frame import Frame
+from taichimyxo.io.trajectory import TrajectoryWriter
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -46,9 +46,9 @@ def assert_one_line_error(p, *expect):
 @pytest.fixture(scope="module")
 def run_with_movie(tmp_path_factory):
     """6 cells, 7200 steps of 1 ms: a movie frame every 600 steps, a trajectory frame every 1200."""
-    from taichimyxo import backend
+    from taichimyxo.runtime import backend
     backend.init("cpu", int(os.environ["TAICHIMYXO_THREADS"]))
-    from taichimyxo.scene_run import run_scene
+    from taichimyxo.runtime.scene_run import run_scene
     movie = verify_video is not None
     sc = build_small_scene(6, run={"hours": 0.002, "dt_ms": 1.0, "seed": 3},
                            output={"movie": movie, "frame_interval_min": 0.01, "trajectory_interval_min": 0.02,
@@ -65,7 +65,7 @@ def test_velocities_are_stored_and_their_norms_are_the_speeds(run_with_movie):
     window, whose norm is log/particles/speed_um_per_min, and what the frames read back carry."""
     import gsd.hoomd
 
-    from taichimyxo.trajectory import read_frames
+    from taichimyxo.io.trajectory import read_frames
     sc, out, _ = run_with_movie
     path = out / f"{sc.name}.gsd"
     frames = list(read_frames(str(path)))
@@ -132,7 +132,7 @@ def test_freud_reads_the_trajectory(run_with_movie):
 
 
 def test_trajectory_interval_apart_from_the_movie(run_with_movie):
-    from taichimyxo.trajectory import read_frames
+    from taichimyxo.io.trajectory import read_frames
     sc, out, summary = run_with_movie
     steps = [fr.step for fr in read_frames(str(out / f"{sc.name}.gsd"))]
     assert steps == list(range(0, 7201, 1200))

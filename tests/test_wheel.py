@@ -10,7 +10,7 @@ import sys
 import tomllib
 from pathlib import Path
 
-from taichimyxo.scene import available_scenes
+from taichimyxo.io.scene import available_scenes
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -28,9 +28,10 @@ def test_the_wheel_layout_has_the_scenes_and_the_limits(tmp_path):
         for pat in patterns:
             for f in src.glob(pat):
                 shutil.copy(f, dst / f.name)
-    assert (site / "taichimyxo/stability_limits.json").is_file()
+    assert (site / "taichimyxo/physics/stability_limits.json").is_file()
     env = dict(os.environ, PYTHONPATH=str(site))
-    code = ("import taichimyxo, taichimyxo.scene as s, taichimyxo.stability as st; print(taichimyxo.__file__); "
+    code = ("import taichimyxo, taichimyxo.io.scene as s, taichimyxo.physics.stability as st; "
+            "print(taichimyxo.__file__); "
             "print(s.SCENES_DIR); print(st._LIMITS_FILE.is_file())")
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, env=env,
                        timeout=600)

@@ -64,7 +64,7 @@ import numpy as np
 from scipy.sparse import coo_matrix, csgraph
 from scipy.spatial import cKDTree
 
-from ..geometry import min_image
+from ..physics.geometry import min_image
 from .aggregate_measure import measure_aggregate
 from .cells import CellGeometry
 from .clusters import cell_clusters

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..frame import Frame
+from ..io.frame import Frame
 
 
 class CellGeometry:

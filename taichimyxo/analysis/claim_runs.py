@@ -71,7 +71,7 @@ def check_record(path, every: int = 1, v_b: float | None = None, **params):
     import zipfile
 
     from ..figures.records import Record
-    from ..trajectory import TrajectoryError
+    from ..io.trajectory import TrajectoryError
     if not os.path.isfile(path):
         raise TrajectoryError(f"record {path} not found")
     try:
@@ -94,7 +94,7 @@ def check_record(path, every: int = 1, v_b: float | None = None, **params):
 
 def check_run_file(path, every: int = 1, v_b: float | None = None, **params) -> None:
     """check_trajectory for a trajectory, check_record for a record: bad input refused before any analysis."""
-    from ..trajectory import check_trajectory
+    from ..io.trajectory import check_trajectory
     if is_record(path):
         check_record(path, every, v_b, **params)
     else:
@@ -105,7 +105,7 @@ def load_runs(paths, every: int = 1, v_b: float | None = None, progress=None, **
     """Analyse each trajectory; a record (`figures --records`) brings the analysis its run made when it finished.
     Every path is checked first (a missing or unreadable file is a TrajectoryError before any analysis). Returns
     dicts(label, path, kind, v_b, summary, scene, record)."""
-    from ..trajectory import check_trajectory, read_frames, read_scene
+    from ..io.trajectory import check_trajectory, read_frames, read_scene
     paths = [os.fspath(p) for p in paths]
     if not paths:
         raise ValueError("claims needs at least one trajectory")

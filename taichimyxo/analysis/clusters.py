@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.sparse import coo_matrix, csgraph
 
-from ..geometry import min_image
+from ..physics.geometry import min_image
 from .params import DEFAULTS
 
 

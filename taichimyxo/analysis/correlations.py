@@ -23,7 +23,7 @@ import math
 
 import numpy as np
 
-from ..geometry import min_image
+from ..physics.geometry import min_image
 from .stats import ols, series_mean_se
 
 CORR_DEFAULTS = dict(dr_um=1.0, r_max_um=25.0, msd_fit_max_fraction=0.25, msd_lags=24)

@@ -90,7 +90,7 @@ def rigid_fraction(analysis: dict) -> float | None:
 def self_curled(trajectory: Path, width: float, reach: float) -> float | None:
     """Fraction of cells whose head lies within W + d_g of their own tail, mean over the last quarter of the
     trajectory's frames."""
-    from ..trajectory import count_frames, read_frames
+    from ..io.trajectory import count_frames, read_frames
     from .clusters import touches_own_tail
     n = count_frames(str(trajectory))
     if n == 0:
@@ -155,7 +155,7 @@ def read_runs(roots) -> list[dict]:
 
 def defaults_of(scene_name: str) -> dict:
     """The base scene's values of the decision keys: its default reading."""
-    from ..scene import Scene
+    from ..io.scene import Scene
     sc = Scene.load(scene_name)
     return {k: sc.raw[k.split(".")[0]][k.split(".")[1]] for k in DECISIONS}
 

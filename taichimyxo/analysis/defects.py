@@ -20,7 +20,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter
 from scipy.optimize import linear_sum_assignment
 
-from ..geometry import min_image
+from ..physics.geometry import min_image
 
 FIELD_DEFAULTS = dict(spacing_um=2.5, smoothing_um=5.0, min_density=0.25, max_step_um=10.0)
 

@@ -13,7 +13,7 @@ import os
 
 import numpy as np
 
-from ..event_table import events_path, read_events
+from ..io.event_table import events_path, read_events
 from .cells import CellGeometry
 from .cluster_sizes import SIZE_DEFAULTS, size_distribution
 from .clusters import cell_clusters

@@ -21,7 +21,7 @@ from typing import Iterable
 
 import numpy as np
 
-from ..frame import Frame
+from ..io.frame import Frame
 from .aggregate_measure import RIGID_EXPONENT
 from .aggregates import find_aggregates
 from .cells import CellGeometry
@@ -286,7 +286,7 @@ def analyze(gsd_path: str, out_dir: str | None = None, every: int = 1, v_b: floa
     """Analyse a trajectory; write <stem>.analysis.json (and PNG plots) next to it or in out_dir. Returns the summary
     (JSON-clean). v_b: free-cell speed in µm/min; default from the stored scene (cell.speed_um_per_min) or 4.
     measures: also the experimental measures (measures.py: defects, cluster sizes, correlations, MSD, events)."""
-    from ..trajectory import read_frames, read_scene
+    from ..io.trajectory import read_frames, read_scene
     t0 = time.perf_counter()
     scene = read_scene(gsd_path)
     if v_b is None:

@@ -6,8 +6,8 @@ from typing import Iterator
 
 import numpy as np
 
-from ..frame import Frame
-from ..geometry import min_image
+from ..io.frame import Frame
+from ..physics.geometry import min_image
 
 
 def synthetic_frames(box=(200.0, 200.0), n_frames=1, dt_s=60.0, disks=(), streams=(), gas=0, gas_speed=4.0,
@@ -225,7 +225,7 @@ def _pool_frame(key, used, parts, disk_out, free, tm, gas_speed, j, l0, N, strai
 def write_synthetic(path: str, v_b: float = 4.0, scene: dict | None = None, **kw) -> str:
     """Write synthetic_frames(**kw) to a GSD trajectory at path. scene: sections stored with it besides "cell"
     (e.g. {"guiding": {"kind": "active"}} to stand for an active-following run)."""
-    from ..trajectory import TrajectoryWriter
+    from ..io.trajectory import TrajectoryWriter
     N = kw.get("N", 8)
     scene = {**(scene or {}), "name": "synthetic",
              "cell": {"particles": N, "width_um": kw.get("width", 0.5), "speed_um_per_min": v_b}}

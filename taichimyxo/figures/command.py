@@ -139,7 +139,7 @@ def run_owners(plans: list, chosen: set | None = None) -> dict:
 
 def print_dry_run(plans: list, jobs: int, records: Path | None = None, chosen: set | None = None,
                   threads: int = 1) -> None:
-    from ..status_line import duration
+    from ..runtime.status_line import duration
     from .plan import bench_rates, makespan, measured_rates, run_seconds, thread_speedup
     rates, measured = bench_rates(), measured_rates(records)
     speedup, measured_threads = thread_speedup(threads)
@@ -200,7 +200,7 @@ def print_dry_run(plans: list, jobs: int, records: Path | None = None, chosen: s
 def run_all(plans: list, executor: str, jobs: int | None, options: dict, chosen: set | None = None) -> int:
     """Every figure's unfinished runs (those chosen; None: all) through one executor; then each sweep's table. 0, or
     the exit status."""
-    from ..scene_run import check_output_dir
+    from ..runtime.scene_run import check_output_dir
     from ..sweep.collect import collect
     from ..sweep.orchestrator import executor_module
     from ..sweep.progress import SweepProgress

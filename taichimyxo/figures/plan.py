@@ -14,7 +14,7 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..scene import SceneError
+from ..io.scene import SceneError
 from ..sweep.rundir import state, write_text_atomic
 from ..sweep.spec import load_sweep
 from .specs import MIN_CELLS, SCALES, Figure
@@ -55,7 +55,7 @@ class FigureRuns:
         """The share of the run's steps its checkpoint holds (0 without one, or one of other parameters)."""
         import numpy as np
 
-        from ..outdir import outputs
+        from ..io.outdir import outputs
         path = outputs(self.run_dir(point), point.scene.name)["ckpt"]
         try:
             with np.load(path, allow_pickle=False) as z:
@@ -229,7 +229,7 @@ def measured_rates(records: Path | None) -> dict:
     out: dict = {}
     if records is None or not Path(records).is_dir():
         return out
-    from ..scene import Scene
+    from ..io.scene import Scene
     from .records import Record
     speedup: dict = {}                      # threads -> thread_speedup, its table read once per count
     for path in sorted(Path(records).glob("*/*.npz")):

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..frame import Frame
+from ..io.frame import Frame
 
 RECORD_VERSION = 1
 
@@ -30,7 +30,7 @@ def record_path(records: Path, runs, point) -> Path:
 
 def panel_frame(path: Path, which: str):
     """The first or last Frame of a trajectory (None when it is missing or empty)."""
-    from ..trajectory import count_frames, read_frames
+    from ..io.trajectory import count_frames, read_frames
     if not path.is_file():
         return None
     n = count_frames(str(path))

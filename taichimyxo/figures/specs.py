@@ -7,7 +7,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..catalogue import sweeps_dir
+from ..io.catalogue import sweeps_dir
 
 # the figures' sweep files: sweeps/figures/ of the clone, or inside the package in a wheel
 SWEEP_DIR = sweeps_dir() / "figures"

@@ -79,7 +79,7 @@ def run_sweep(path, executor: str = "local", jobs: int | None = None, out=None, 
     if dry_run:
         return {"sweep": sweep, "root": root, "points": listing, "results": {}, "counts": counts, "jobs": jobs}
     listing = check_earlier_runs(listing, root, resume, overwrite)
-    from ..scene_run import check_output_dir
+    from ..runtime.scene_run import check_output_dir
     check_output_dir(str(root))
     write_text_atomic(root / "sweep.toml", Path(sweep.path).read_text())     # what was asked, beside the results
     dirs = [str(prepare(p, root, sweep)) for p in points]
@@ -108,7 +108,7 @@ def check_earlier_runs(listing: list, root, resume: bool, overwrite: bool) -> li
     resume, and every run folder is removed and started again only with overwrite. Returns the listing to run."""
     if resume and overwrite:
         raise SweepError("--resume and --overwrite: give one (continue the sweep's runs, or start them again)")
-    from ..outdir import refuse_file_as_folder
+    from ..io.outdir import refuse_file_as_folder
     refuse_file_as_folder(root)
     unfinished = [(p, d, st) for p, d, st in listing if st in ("interrupted", "failed")]
     going = [p.name for p, _, st in listing if st == "running"]

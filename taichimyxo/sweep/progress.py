@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import time
 
-from ..status_line import StatusLine, duration
+from ..runtime.status_line import StatusLine, duration
 
 
 class SweepProgress:

@@ -6,7 +6,7 @@ import json
 import os
 from pathlib import Path
 
-from ..scene import to_toml
+from ..io.scene import to_toml
 
 RESULT = "result.json"
 SCENE_FILE = "scene.toml"

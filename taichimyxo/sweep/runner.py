@@ -65,8 +65,8 @@ def run_point(run_dir: str, threads: int = 1) -> dict:
 
 
 def _run(run_dir: Path, point: dict, base: dict, threads: int, t0: float) -> dict:
-    from ..scene import Scene
-    from ..scene_run import run_scene
+    from ..io.scene import Scene
+    from ..runtime.scene_run import run_scene
     scene = Scene.load(str(run_dir / SCENE_FILE))
     # where the run writes its files: its own folder, or (`videos`) the shared folder point.json names, relative
     out = (run_dir / point.get("out", ".")).resolve()
@@ -90,7 +90,7 @@ def _run(run_dir: Path, point: dict, base: dict, threads: int, t0: float) -> dic
     if status == "failed":
         res["error"] = f"stopped at step {summary['steps']}: {summary.get('invariant_broken', 'failed')}"
     elif point.get("analysis") is not None:
-        from ..api import analyze
+        from ..interface.api import analyze
         t_an = time.perf_counter()
         analysis = analyze(str(gsd), out_dir=str(out), every=int(point["analysis"].get("every", 1)),
                            plots=bool(point["analysis"].get("plots", False)))

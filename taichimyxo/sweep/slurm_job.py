@@ -5,8 +5,8 @@ How a time limit becomes a resumed run:
 
 1. the job is submitted with ``--signal=USR2@signal_delay_s``: slurmctld sends SIGUSR2 to the job's step at most
    signal_delay_s + 30 s before the time limit (it checks time limits every 30 s) and SIGTERM at the limit;
-2. :class:`TimeLimitStop` turns that SIGUSR2 into the stop the simulation knows (taichimyxo.run_loop.Interrupt): at
-   once when the run's driver listens, otherwise one SIGTERM as soon as it does (the signal came before the
+2. :class:`TimeLimitStop` turns that SIGUSR2 into the stop the simulation knows (taichimyxo.runtime.run_loop.Interrupt):
+   at once when the run's driver listens, otherwise one SIGTERM as soon as it does (the signal came before the
    simulation started); the driver finishes its chunk, closes the trajectory and writes the checkpoint (as Ctrl-C);
 3. run_point returns "interrupted", and the handler submitit installed for SIGUSR2 runs: ``checkpoint()`` (submitit's
    Checkpointable: the same call again, which resumes from the checkpoint on disk), ``scontrol requeue``, exit. The
@@ -33,8 +33,8 @@ from pathlib import Path
 
 from submitit.helpers import Checkpointable
 
-from ..backend import reset
-from ..run_loop import Interrupt
+from ..runtime.backend import reset
+from ..runtime.run_loop import Interrupt
 from .rundir import LOG_FILE
 from .runner import run_point
 
@@ -91,7 +91,7 @@ class TimeLimitStop:
 
 
 def _listening_driver() -> Interrupt | None:
-    """The simulation driver's signal catcher, when it handles SIGTERM now (taichimyxo.run_loop.drive)."""
+    """The simulation driver's signal catcher, when it handles SIGTERM now (taichimyxo.runtime.run_loop.drive)."""
     driver = getattr(signal.getsignal(signal.SIGTERM), "__self__", None)
     return driver if isinstance(driver, Interrupt) else None
 

@@ -15,7 +15,7 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..scene import SCHEMA, Scene, SceneError, toml_value
+from ..io.scene import SCHEMA, Scene, SceneError, toml_value
 
 TOP_KEYS = ("name", "description", "scene", "seeds", "hours", "scale", "box_um", "force")
 TABLES = ("grid", "set", "outputs")
@@ -130,9 +130,9 @@ class Sweep:
             nested.setdefault(sec, {})[k] = val
         try:
             scene = Scene.load(base, nested)
-            from ..stability import check_step
+            from ..physics.stability import check_step
             check_step(scene, force=self.force)
-            from ..resources import check_resources
+            from ..runtime.resources import check_resources
             check_resources(scene, available=2 ** 62)      # Taichi's indices; memory is the executing machine's
         except SceneError as e:
             msg = str(e).replace("--set: ", "")
@@ -258,7 +258,7 @@ def _scene_path(base: str, path: Path) -> str:
 def load_sweep(path) -> Sweep:
     """Read and check a sweep file (its format: taichimyxo/sweep/__init__.py). The points are resolved and validated
     by Sweep.points()."""
-    from ..catalogue import resolve_sweep
+    from ..io.catalogue import resolve_sweep
     path = resolve_sweep(path)
     try:
         data = tomllib.loads(path.read_text())

@@ -15,8 +15,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))          # benchmarks/, for compare_runs
 from compare_runs import frame_stats  # noqa: E402
 
+from taichimyxo.io.trajectory import read_frames  # noqa: E402
 from taichimyxo.render import render_frame  # noqa: E402
-from taichimyxo.trajectory import read_frames  # noqa: E402
 
 
 def frame_at(path: str, minutes: float):
