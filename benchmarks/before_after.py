@@ -23,11 +23,16 @@ REPO = HERE.parent
 WORKER = r"""
 import json, sys, time
 import numpy as np
-from taichimyxo import backend
+try:                                    # the package's layout in folders
+    from taichimyxo.runtime import backend
+    from taichimyxo.io.scene import Scene
+    from taichimyxo.runtime.simulation import Simulation
+except ImportError:                     # an earlier commit's flat layout
+    from taichimyxo import backend
+    from taichimyxo.scene import Scene
+    from taichimyxo.simulation import Simulation
 backend.init("cpu", int(sys.argv[3]))
 import taichi as ti
-from taichimyxo.io.scene import Scene
-from taichimyxo.runtime.simulation import Simulation
 dt, steps = float(sys.argv[1]), int(sys.argv[2])
 z = np.load(sys.argv[4])
 over = {"output": {"movie": False}}

@@ -42,9 +42,14 @@ CASES = {
 WORKER = r"""
 import hashlib, json, sys
 import numpy as np
-from taichimyxo import backend
-from taichimyxo.io.scene import Scene
-import taichimyxo.runtime.simulation as simulation
+try:                                    # the package's layout in folders
+    from taichimyxo.runtime import backend
+    from taichimyxo.io.scene import Scene
+    import taichimyxo.runtime.simulation as simulation
+except ImportError:                     # an earlier commit's flat layout
+    from taichimyxo import backend
+    from taichimyxo.scene import Scene
+    import taichimyxo.simulation as simulation
 name, over, options = sys.argv[1], json.loads(sys.argv[2]), json.loads(sys.argv[5])
 over.setdefault("output", {})["movie"] = False
 sc = Scene.load(name, over, preview=True)

@@ -9,7 +9,7 @@ import pytest
 
 RUN = r"""
 import numpy as np, sys
-from taichimyxo import backend
+from taichimyxo.runtime import backend
 backend.init("cpu", threads=int(sys.argv[1]))
 from taichimyxo.io.scene import Scene
 from taichimyxo.runtime.simulation import Simulation
