@@ -132,6 +132,19 @@ class HeadToTail(Term):
         return out
 
     @ti.func
+    def push_end(self, F, p, g, shared: ti.template()):
+        """g on end particle p, or half on p and half on the other particle of its end segment."""
+        N = ti.static(self.N)
+        w = 0.5 if ti.static(shared) else 1.0
+        F[p, 0] += w * g[0]
+        F[p, 1] += w * g[1]
+        if ti.static(shared):
+            q = 1 if p == 0 else N - 2
+            F[q, 0] += w * g[0]
+            F[q, 1] += w * g[1]
+        return F
+
+    @ti.func
     def add_cell_forces(self, c, T, F):
         """The gathered pull on cell c's head (passive: its component normal to the head's direction) and, with
         adhesion, the reaction on its tail: each on the end particle, or shared by the end segment's two particles
@@ -145,24 +158,7 @@ class HeadToTail(Term):
             if ti.static(self.kind == "passive"):
                 nh = perp(ti.Vector([T[head, 0], T[head, 1]]))
                 g = g.dot(nh) * nh
-            if ti.static(self.pull_shared):
-                head2 = 1 if head == 0 else N - 2
-                F[head, 0] += 0.5 * g[0]
-                F[head, 1] += 0.5 * g[1]
-                F[head2, 0] += 0.5 * g[0]
-                F[head2, 1] += 0.5 * g[1]
-            else:
-                F[head, 0] += g[0]
-                F[head, 1] += g[1]
+            F = self.push_end(F, head, g, ti.static(self.pull_shared))
             if ti.static(self.kind == "adhesion"):
-                gt = self.g_tail[c]
-                if ti.static(self.reaction_shared):
-                    tail2 = 1 if tail == 0 else N - 2
-                    F[tail, 0] += 0.5 * gt[0]
-                    F[tail, 1] += 0.5 * gt[1]
-                    F[tail2, 0] += 0.5 * gt[0]
-                    F[tail2, 1] += 0.5 * gt[1]
-                else:
-                    F[tail, 0] += gt[0]
-                    F[tail, 1] += gt[1]
+                F = self.push_end(F, tail, self.g_tail[c], ti.static(self.reaction_shared))
         return F
