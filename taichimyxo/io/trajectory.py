@@ -205,18 +205,19 @@ def trim_after(path: str, step: int) -> int:
     killed or its disk filled), rewriting the file through a temporary one so it stays readable throughout; the
     run's events table loses its rows after `step` too. Returns the frames dropped."""
     hoomd = _gsd()
-    with hoomd.open(path, "r") as t:
-        steps = [int(f.configuration.step) for f in t]
-        keep = sum(1 for s in steps if s <= step)
-        if keep < len(steps):
-            tmp = path + ".trim.tmp"
-            with hoomd.open(tmp, "w") as out:
-                for i in range(keep):
-                    f = t[i]
-                    if i > 0:
-                        f.log.pop("taichimyxo/scene_json", None)    # frame 0's, which reading repeats
-                    out.append(f)
+    import gsd.fl
+    with gsd.fl.open(path, "r") as g:          # the steps alone, not every frame's particles
+        steps = [int(g.read_chunk(i, "configuration/step")[0]) if g.chunk_exists(i, "configuration/step") else 0
+                 for i in range(g.nframes)]     # step 0, the default, is not stored
+    keep = sum(1 for s in steps if s <= step)
     if keep < len(steps):
+        tmp = path + ".trim.tmp"
+        with hoomd.open(path, "r") as t, hoomd.open(tmp, "w") as out:
+            for i in range(keep):
+                f = t[i]
+                if i > 0:
+                    f.log.pop("taichimyxo/scene_json", None)    # frame 0's, which reading repeats
+                out.append(f)
         os.replace(tmp, path)
     from .event_table import events_path
     ev = events_path(path)
