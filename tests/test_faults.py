@@ -124,9 +124,8 @@ def test_a_second_run_into_a_folder_a_run_is_writing_is_refused(tmp_path):
                               "--no-movie", "--quiet", "--out", str(out)], cwd=REPO, env=env,
                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
-        t_end = time.monotonic() + 300
-        while not (out / "S1-preview.gsd").is_file():           # the first run is writing
-            assert first.poll() is None and time.monotonic() < t_end
+        while not (out / "S1-preview.gsd").is_file():           # the first run is writing (or it has failed)
+            assert first.poll() is None
             time.sleep(0.2)
         for extra in ((), ("--resume",), ("--overwrite",)):
             line = error_line(cli("scene", *PREVIEW, "--out", out, *extra))
