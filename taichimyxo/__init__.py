@@ -25,6 +25,7 @@ _LAZY = {
     "analyze": "interface.api", "claims": "interface.api", "Periodic": "runtime.triggers",
     "WallClock": "runtime.triggers", "Frame": "io.frame", "Scene": "io.scene", "SceneError": "io.scene",
     "Run": "runtime.run_loop", "drive": "runtime.run_loop", "load_sweep": "sweep", "run_sweep": "sweep",
+    "read_tracks": "io.tracks", "tracks_report": "interface.tracks_api",
 }
 # tm.NAME -> the submodule (tm.writers, tm.api, ...)
 _SUBMODULES = {"writers": "io.writers", "triggers": "runtime.triggers", "run_loop": "runtime.run_loop",

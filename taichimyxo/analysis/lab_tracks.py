@@ -53,3 +53,35 @@ def reversals(tracks, window: int = 2, reversal_deg: float = 150.0, min_speed_vb
     n = sum(len(m) for m in times)
     return {"reversals": n, "per_cell_hour": n / (span / 3600.0) if span > 0 else np.nan,
             "run_durations_s": runs, "mean_run_s": float(np.mean(runs)) if runs else np.nan, "times_s": times}
+
+
+def degrade(tracks, seed: int = 0, frame_s: float | None = None, noise_um: float = 0.0, missed: float = 0.0,
+            swaps_per_track_hour: float = 0.0, **reading):
+    """Tracks as a microscope and a tracker would give them (benchmarks/tracks_validation.py): resampled to frame_s,
+    Gaussian position noise of noise_um per axis, a fraction `missed` of detections lost, and identity swaps (at a
+    random time two tracks near each other exchange their ids from then on, swaps_per_track_hour per track-hour).
+    The result is read back through the lab's path (taichimyxo.io.tracks.assemble: gaps split, jumps cut, counted),
+    so a degraded simulation meets what a lab's tracks meet. reading: assemble's options."""
+    from ..io.tracks import assemble
+    from .track_groups import resample
+    rng = np.random.default_rng(seed)
+    tr = resample(tracks, frame_s) if frame_s else tracks
+    ids = np.concatenate([np.full(len(t), k) for k, (t, _) in enumerate(tr.tracks)])
+    ts = np.concatenate([t for t, _ in tr.tracks])
+    xy = np.concatenate([p for _, p in tr.tracks]) + rng.normal(0.0, noise_um, (len(ts), 2)) if noise_um else \
+        np.concatenate([p for _, p in tr.tracks])
+    hours = sum(t[-1] - t[0] for t, _ in tr.tracks) / 3600.0
+    for _ in range(rng.poisson(swaps_per_track_hour * hours) if swaps_per_track_hour > 0 else 0):
+        t0 = rng.choice(ts)
+        now = np.flatnonzero(ts == t0)
+        a = rng.choice(now)
+        d = np.linalg.norm(xy[now] - xy[a], axis=1)
+        d[now == a] = np.inf
+        b = now[int(np.argmin(d))]
+        ia, ib = ids[a], ids[b]
+        later = ts >= t0
+        sa, sb = later & (ids == ia), later & (ids == ib)
+        ids[sa], ids[sb] = ib, ia
+    keep = rng.random(len(ts)) >= missed
+    return assemble(ids[keep], ts[keep], xy[keep], tr.frame_s, source=f"{tracks.source} (degraded)",
+                    box=tracks.box, **reading)

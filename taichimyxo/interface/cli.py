@@ -162,6 +162,8 @@ def _build_parser() -> argparse.ArgumentParser:
                         "benchmarks-results/)")
     from ..figures.command import add_parser as add_figures_parser
     add_figures_parser(sub, executor_arguments)
+    from .cli_tracks import add_parser as add_tracks_parser
+    add_tracks_parser(sub)
     return p
 
 
@@ -393,6 +395,9 @@ def main(argv: list[str] | None = None) -> int:
             return cmd_bench(args)
         if args.cmd == "figures":
             return args.figures_main(args, executor_options(args))
+        if args.cmd == "tracks":
+            from .cli_tracks import main as tracks_main
+            return tracks_main(args)
     except (SceneError, TrajectoryError) as e:
         return _fail(str(e))
     except KeyboardInterrupt:

@@ -24,16 +24,19 @@ class TracksError(SceneError):
 
 # TrackMate's spots table: its column names (units in the header rows of recent versions)
 TRACKMATE = {"track": "TRACK_ID", "x": "POSITION_X", "y": "POSITION_Y", "t": "POSITION_T", "frame": "FRAME"}
-PLAIN = {"track": ("track", "track_id", "id", "cell"), "t": ("time", "t", "time_s", "frame"), "x": ("x",),
-         "y": ("y",)}
+PLAIN = {"track": ("track", "track_id", "id", "cell"), "t": ("time", "t", "time_s", "frame"), "x": ("x", "x_um"),
+         "y": ("y", "y_um")}
 
 
 @dataclass
 class Tracks:
-    """Tracks in µm and s: ``tracks[k] = (t (n,), xy (n, 2))`` in time order, and the counts of what reading did."""
+    """Tracks in µm and s: ``tracks[k] = (t (n,), xy (n, 2))`` in time order, and the counts of what reading did;
+    the frame interval (s), and the periodic box (µm) of a simulation's unwrapped tracks (None for a lab's)."""
     tracks: list = field(default_factory=list)
     counts: dict = field(default_factory=dict)
     source: str = ""
+    frame_s: float = 0.0
+    box: tuple | None = None
 
     @property
     def n_points(self) -> int:
@@ -120,7 +123,7 @@ def split_track(t: np.ndarray, xy: np.ndarray, frame_s: float, max_gap_frames: i
 
 
 def assemble(ids, ts, xy, frame_s: float, *, max_gap_frames: int = 2, max_speed_um_per_min: float = 30.0,
-             min_points: int = 5, source: str = "", extra_counts: dict | None = None) -> Tracks:
+             min_points: int = 5, source: str = "", extra_counts: dict | None = None, box=None) -> Tracks:
     """Tracks from per-spot rows (ids, times s, xy µm): each in time order (a spot listed twice at one time keeps
     the first), split at gaps and jumps, pieces shorter than min_points set aside; everything counted."""
     counts = {"tracks_read": 0, "spots_read": int(len(ids)), "duplicate_spots": 0, "split_at_gaps": 0,
@@ -144,7 +147,7 @@ def assemble(ids, ts, xy, frame_s: float, *, max_gap_frames: int = 2, max_speed_
             else:
                 out.append((a, b))
     counts["tracks_kept"] = len(out)
-    return Tracks(out, counts, source)
+    return Tracks(out, counts, source, float(frame_s), None if box is None else tuple(float(b) for b in box))
 
 
 def read_tracks(path, *, pixel_um: float | None = None, frame_s: float | None = None, time_unit: str = "s",
@@ -181,11 +184,11 @@ def from_frames(frames, every_s: float | None = None) -> Tracks:
     """A simulation's cells as centroid tracks (one point per cell and frame, chains unwrapped across the periodic
     box), so measured and simulated tracks go through the same measures."""
     ids, ts, xy = [], [], []
-    prev, shift = None, None
+    prev, shift, box = None, None, None
     for fr in frames:
+        box = np.asarray(fr.box, float)
         c = np.asarray(fr.positions, float).mean(axis=1)
         if prev is not None:                     # undo the periodic wrap of the centroids
-            box = np.asarray(fr.box, float)
             d = c + shift - prev
             shift = shift - box * np.round(d / box)
         else:
@@ -198,4 +201,4 @@ def from_frames(frames, every_s: float | None = None) -> Tracks:
         raise TracksError("from_frames: no frames")
     ids, ts, xy = np.concatenate(ids), np.concatenate(ts), np.concatenate(xy)
     frame_s = every_s or float(np.median(np.diff(np.unique(ts))))
-    return assemble(ids, ts, xy, frame_s, source="simulation", min_points=2)
+    return assemble(ids, ts, xy, frame_s, source="simulation", min_points=2, box=box)
