@@ -1,4 +1,4 @@
-"""The mechanism report on a public data set of real M. xanthus tracks (docs/measures.md "A real example"): the
+"""The mechanism report on a public data set of real M. xanthus tracks (docs/lab-tracks.md "A real example"): the
 Igoshin group's circular-aggregate tracks (Balagam et al., mSystems 2021, Fig 3: fluorescently labelled cells, 1 in
 250, in a swarm of TraAB-overexpressing cells forming circular aggregates, 16 h, 60 frames 1 min apart, positions
 in µm at 0.5136 µm per pixel). The data are not shipped with taichimyxo (their repository states no licence):

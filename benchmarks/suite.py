@@ -49,6 +49,8 @@ BENCHMARKS = {
                          "benchmarks/results/rigid_body_check.md"),
     "tracks_validation": ("physics", "the mechanism report on degraded tracks of simulated runs",
                           "benchmarks/results/tracks_validation.md"),
+    "lab_example": ("physics", "the mechanism report on a public data set of M. xanthus tracks (downloaded)",
+                    "docs/lab-tracks.md"),
     "gpu_check": ("device", "the gpu tests and the CUDA throughput, on a machine with a CUDA GPU",
                   "gpu-check-results/"),
 }

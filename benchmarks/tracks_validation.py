@@ -88,7 +88,8 @@ def main(argv=None) -> int:
         level = "" if r["level"] is None else f"{r['level']:g}"
         mode = "given" if r["mode"] == "v_b given" else "from tracks"
         lines.append(f"| {r['degradation']} | {level} | {mode} | " + " | ".join(cells) + " |")
-    lines += ["", f"Made in {meta['seconds']:.0f} s by `python benchmarks/tracks_validation.py {' '.join(a.refs)}`."]
+    lines += ["", f"Made in {meta['seconds']:.0f} s by `python benchmarks/tracks_validation.py REFS`, REFS the runs of "
+              "`python -m taichimyxo sweep sweeps/mechanisms.toml --out REFS`."]
     (out / "tracks_validation.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
     return 0

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from taichimyxo.analysis.lab_tracks import degrade
-from taichimyxo.analysis.mechanism_report import compare, in_group_speeds
+from taichimyxo.analysis.mechanism_report import compare, in_group_speeds, sentence
 from taichimyxo.analysis.track_groups import find_groups, group_speeds, resample
 from taichimyxo.interface.cli import main
 from taichimyxo.io.tracks import assemble
@@ -148,6 +148,15 @@ def test_the_report_cannot_tell_without_points_in_groups_or_between_equal_mechan
              "b": [in_group_speeds(_mechanism(31, **MECHS["adhesion"]), v_b=V)]}
     res = compare(in_group_speeds(_mechanism(32, **MECHS["adhesion"])), twins, n_boot=100)
     assert res["strength"] != "strong"
+
+
+def test_the_report_says_when_the_nearest_mechanism_does_not_fit():
+    refs = {m: [in_group_speeds(_mechanism(40 + i, **kw), v_b=V) for i in range(2)] for m, kw in MECHS.items()}
+    res = compare(in_group_speeds(_mechanism(99, edge=3.5 * V), v_b=V), refs, n_boot=100)
+    assert res["nearest"] == "active following" and not res["fits"]
+    assert "none of the simulated mechanisms fits" in sentence(res)
+    same = compare(in_group_speeds(_mechanism(98, **MECHS["active following"]), v_b=V), refs, n_boot=100)
+    assert same["fits"] and "fits" not in sentence(same)
 
 
 def test_tracks_command_reads_a_csv_and_compares_with_runs(tmp_path, capsys):

@@ -107,3 +107,66 @@ def test_a_simulation_gives_the_same_tracks_through_its_centroids():
         frames.append(SimpleNamespace(positions=pos, time_s=k * FRAME_S, box=(20.0, 20.0)))
     tr = from_frames(frames)
     assert tr.counts["tracks_kept"] == 1 and np.allclose(step_speeds(tr), 4.0)
+
+
+MODEL_XML = """<?xml version="1.0" encoding="UTF-8"?>
+<TrackMate version="7.11.1"><Model spatialunits="micron" timeunits="{unit}"><AllSpots nspot="{n}">{spots}</AllSpots>
+<AllTracks>{tracks}</AllTracks><FilteredTracks>{kept}</FilteredTracks></Model>
+<Settings><ImageData filename="movie.tif" pixelwidth="0.1" timeinterval="30.0"/></Settings></TrackMate>"""
+
+
+def model_xml(path, cells, kept=None, stray=0, unit="sec", with_t=True):
+    """A TrackMate model file: cells[k] = (t, xy) becomes track k (its spots chained by edges); `stray` spots in no
+    track; FilteredTracks lists `kept` (default all)."""
+    spots, tracks, sid = [], [], 0
+    for k, (t, xy) in enumerate(cells):
+        ids = []
+        for i, (ti_, (x, y)) in enumerate(zip(t, xy)):
+            tt = f' POSITION_T="{ti_ / (60.0 if unit == "min" else 1.0):g}"' if with_t else ""
+            spots.append(f'<Spot ID="{sid}" POSITION_X="{x:g}" POSITION_Y="{y:g}"{tt} FRAME="{i}"/>')
+            ids.append(sid)
+            sid += 1
+        edges = "".join(f'<Edge SPOT_SOURCE_ID="{a}" SPOT_TARGET_ID="{b}"/>' for a, b in zip(ids, ids[1:]))
+        tracks.append(f'<Track name="Track_{k}" TRACK_ID="{k}">{edges}</Track>')
+    for j in range(stray):
+        spots.append(f'<Spot ID="{sid + j}" POSITION_X="90" POSITION_Y="90" POSITION_T="0" FRAME="0"/>')
+    kept = range(len(cells)) if kept is None else kept
+    path.write_text(MODEL_XML.format(unit=unit, n=len(spots), spots="".join(spots), tracks="".join(tracks),
+                                     kept="".join(f'<TrackID TRACK_ID="{k}"/>' for k in kept)))
+    return path
+
+
+def test_trackmate_model_xml_reads_tracks_from_edges_honours_filtered_tracks_and_counts_strays(tmp_path):
+    cells = [straight(n=20), straight(n=20, start=(0, 30)), straight(n=20, start=(0, 60))]
+    tr = read_tracks(model_xml(tmp_path / "m.xml", cells, kept=[0, 2], stray=3))
+    assert tr.counts["tracks_kept"] == 2 and tr.counts["spots_without_track"] == 20 + 3
+    assert tr.frame_s == pytest.approx(FRAME_S)
+    ys = sorted(float(xy[0, 1]) for _, xy in tr.tracks)
+    assert ys == [0.0, 60.0] and np.allclose(step_speeds(tr), 4.0)
+    # minutes in the file, or frames only (then the settings' interval): the same tracks in s
+    for kw in (dict(unit="min"), dict(with_t=False)):
+        t2 = read_tracks(model_xml(tmp_path / "m2.xml", cells, **kw))
+        assert np.allclose(t2.tracks[0][0], cells[0][0]) and np.allclose(step_speeds(t2), 4.0)
+
+
+def test_trackmate_tracks_export_xml_counts_frames_at_its_interval(tmp_path):
+    parts = "".join('<particle nSpots="20">' + "".join(
+        f'<detection t="{i}" x="{x:g}" y="{y:g}" z="0"/>' for i, (x, y) in enumerate(straight(n=20, start=(0, k))[1]))
+        + "</particle>" for k in (0, 40))
+    f = tmp_path / "e.xml"
+    f.write_text(f'<?xml version="1.0"?><Tracks nTracks="2" spaceUnits="micron" frameInterval="0.5" timeUnits="min" '
+                 f'from="TrackMate v7">{parts}</Tracks>')
+    tr = read_tracks(f)
+    assert tr.counts["tracks_kept"] == 2 and tr.frame_s == pytest.approx(30.0)
+    assert np.allclose(step_speeds(tr), 4.0)
+
+
+@pytest.mark.parametrize("text, words", [("<a><b/></a>", "not TrackMate's"), ("<Tracks", "not readable as XML"),
+                                         ('<Tracks><particle><detection t="0" y="1"/></particle></Tracks>',
+                                          "detection without a number for x")])
+def test_bad_xml_is_one_line_naming_the_file(tmp_path, text, words):
+    f = tmp_path / "bad.xml"
+    f.write_text(text)
+    with pytest.raises(TracksError, match=words) as e:
+        read_tracks(f)
+    assert str(f) in str(e.value) and "\n" not in str(e.value)

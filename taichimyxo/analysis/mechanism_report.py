@@ -1,6 +1,6 @@
 """The paper's proposed test as a report: which guiding mechanism a lab's tracks match, judged by the speeds of cells
-in circular aggregates ("distribution of cell speeds in circular aggregates", the paper's abstract; docs/measures.md
-"Lab tracks").
+in circular aggregates ("distribution of cell speeds in circular aggregates", the paper's abstract;
+docs/lab-tracks.md).
 
 Measured tracks and each mechanism's simulated runs go through one code path: the simulations' centroids
 (``from_frames``) resampled to the measured frame interval, groups found from the motion (track_groups), speeds in
@@ -12,6 +12,10 @@ Its uncertainty is a bootstrap over tracks, both sides (a track's points are not
   distance's upper bound is below every other mechanism's lower bound; *preferred* when p >= 0.80;
 - else the data *cannot tell* the nearest two apart; and they cannot tell anything without enough points in groups
   (``min_points`` measured, and each mechanism's).
+
+Nearest is not the same as alike: the report also gives each mechanism's own spread (how far one of its runs lies
+from its other runs) and says when the nearest mechanism is more than ``FIT_FACTOR`` times that far from the
+measurement (the data match none of the simulated mechanisms well).
 """
 from __future__ import annotations
 
@@ -21,6 +25,7 @@ from scipy.stats import wasserstein_distance
 from .track_groups import DEFAULTS, find_groups, group_speeds, resample
 
 MIN_POINTS = 100
+FIT_FACTOR = 2.0          # the nearest mechanism fits when the distance is at most this many times its runs' own
 
 
 def in_group_speeds(tracks, frame_s: float | None = None, v_b: float | None = None, **params) -> dict:
@@ -32,6 +37,14 @@ def in_group_speeds(tracks, frame_s: float | None = None, v_b: float | None = No
     res["groups"] = groups
     res["_points"] = pts
     return res
+
+
+def _self_distance(runs: list[dict]) -> float:
+    """How far one run of a mechanism lies from its other runs (mean over runs, leave one out): the distance a
+    measurement made by that mechanism can be expected at; NaN with one run."""
+    d = [wasserstein_distance(r["_in"], np.concatenate([o["_in"] for j, o in enumerate(runs) if j != i]))
+         for i, r in enumerate(runs) if len(r["_in"]) and any(len(o["_in"]) for j, o in enumerate(runs) if j != i)]
+    return float(np.mean(d)) if d else np.nan
 
 
 def _by_track(speeds: np.ndarray, track: np.ndarray) -> list[np.ndarray]:
@@ -58,7 +71,8 @@ def compare(measured: dict, references: dict[str, list[dict]], n_boot: int = 500
         rows[m] = {"points": int(len(s)), "runs": len(references[m]),
                    "median_vref": float(np.median(s)) if len(s) else np.nan,
                    "edge_median_vref": float(np.nanmedian([r["edge_speed_median_vref"] for r in references[m]])),
-                   "distance": float(wasserstein_distance(meas, s)) if len(s) and len(meas) else np.nan}
+                   "distance": float(wasserstein_distance(meas, s)) if len(s) and len(meas) else np.nan,
+                   "self_distance": _self_distance(references[m])}
     enough = len(meas) >= min_points and all(len(s) >= min_points for s, _ in ref.values())
     out = {"measured_points": int(len(meas)), "mechanisms": rows, "n_boot": n_boot}
     if not enough:
@@ -93,7 +107,9 @@ def compare(measured: dict, references: dict[str, list[dict]], n_boot: int = 500
         verdict = f"cannot tell {names[best]} from {second}"
     else:
         verdict = names[best]
-    out.update(verdict=verdict, strength=strength, nearest=names[best],
+    own = rows[names[best]]["self_distance"]
+    fits = not np.isfinite(own) or rows[names[best]]["distance"] <= FIT_FACTOR * own
+    out.update(verdict=verdict, strength=strength, nearest=names[best], fits=bool(fits),
                why=f"{names[best]} is nearest in {near[best]:.0%} of {n_boot} bootstrap replicates"
                    + ("; its interval is apart from every other" if separated else ""))
     return out
@@ -134,8 +150,12 @@ def sentence(res: dict) -> str:
         return f"The tracks cannot tell {what}: {res['why']}."
     word = "strongly prefer" if res["strength"] == "strong" else "prefer"
     m = res["mechanisms"][res["nearest"]]
-    return (f"The tracks {word} {res['nearest']}: {res['why']} (distance {m['distance']:.2f} v_ref, "
-            f"95% CI {m['ci95'][0]:.2f}-{m['ci95'][1]:.2f}).")
+    text = (f"The tracks {word} {res['nearest']} (nearest in {m['p_nearest']:.0%} of {res['n_boot']} bootstrap "
+            f"replicates; distance {m['distance']:.2f} x the free speed, 95% CI {m['ci95'][0]:.2f}-{m['ci95'][1]:.2f})")
+    if not res.get("fits", True):
+        text += (f", but match it less closely than its own runs match each other ({m['self_distance']:.2f}): none "
+                 f"of the simulated mechanisms fits them well")
+    return text + "."
 
 
 def _map(ax, meas: dict) -> None:

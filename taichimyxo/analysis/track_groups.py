@@ -1,5 +1,5 @@
 """Rotating groups found from centroid tracks alone (a lab's, or a simulation's through ``from_frames``), and the
-speeds inside and outside them: the measures of the paper's proposed experiment (docs/measures.md "Lab tracks").
+speeds inside and outside them: the measures of the paper's proposed experiment (docs/lab-tracks.md).
 
 A centroid has no orientation, so a group is read from the motion (docs/measures.md gives why each step reads the
 paper's "circular aggregates"):
@@ -37,7 +37,8 @@ from scipy.spatial import cKDTree
 from .tracking import confirmed
 
 DEFAULTS = dict(window_path_um=20.0, window_min=None, min_speed_um_per_min=0.2, max_radius_um=60.0,
-                min_sweep_deg=20.0, min_steady=0.8, centre_tol_um=2.5, centre_tol_rel=0.25, min_tracks=4, min_cover_deg=180.0)
+                min_sweep_deg=20.0, min_steady=0.8, centre_tol_um=2.5, centre_tol_rel=0.25, min_tracks=4,
+                min_cover_deg=180.0)
 
 
 def window_minutes(tracks, P: dict) -> float:

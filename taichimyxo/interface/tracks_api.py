@@ -1,6 +1,5 @@
 """What ``python -m taichimyxo tracks`` does: a lab's cell tracks (or a simulated run's centroids) measured, and,
-given simulated runs of the guiding mechanisms, the paper's proposed test as a report (docs/measures.md "Lab
-tracks").
+given simulated runs of the guiding mechanisms, the paper's proposed test as a report (docs/lab-tracks.md).
 
     import taichimyxo as tm
     res = tm.tracks_report("spots.csv", pixel_um=0.13, frame_s=30, against=["REFS"], out_dir="report")
@@ -123,12 +122,13 @@ def _markdown(res: dict) -> str:
              f"{res['measures']['groups']['v_ref_from']}; the runs: their scene's v_b).", "",
              "![report](report.png)", "",
              "| mechanism | runs | points in groups | median speed in groups | edge speed | distance | 95% CI | "
-             "nearest in |", "|---|---|---|---|---|---|---|---|"]
+             "nearest in | own runs' spread |", "|---|---|---|---|---|---|---|---|---|"]
     for m, row in r["mechanisms"].items():
         ci = row.get("ci95")
         lines.append(f"| {m} | {row['runs']} | {row['points']} | {row['median_vref']:.2f} | "
                      f"{row['edge_median_vref']:.2f} | {row['distance']:.3f} | "
-                     + (f"{ci[0]:.3f}-{ci[1]:.3f} | {row['p_nearest']:.0%} |" if ci else "- | - |"))
+                     + (f"{ci[0]:.3f}-{ci[1]:.3f} | {row['p_nearest']:.0%} |" if ci else "- | - |")
+                     + f" {row['self_distance']:.3f} |")
     g = res["measures"]["groups"]
     lines += ["", f"Measured: median speed in groups {g['speed_in_median_vref']:.2f}, edge "
               f"{g['edge_speed_median_vref']:.2f}, outside {g['speed_out_median_vref']:.2f} (v_ref = "

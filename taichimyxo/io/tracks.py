@@ -64,6 +64,84 @@ def _number(cell: str) -> float | None:
     return v if np.isfinite(v) else None
 
 
+_TIME_UNITS = {"sec": 1.0, "s": 1.0, "min": 60.0, "hou": 3600.0, "h": 3600.0, "ms": 1e-3}
+
+
+def _xml_number(el, key: str, path: Path):
+    v = el.get(key)
+    x = _number(v) if v is not None else None
+    if x is None:
+        raise TracksError(f"{path}: a {el.tag} without a number for {key} (TrackMate XML)")
+    return x
+
+
+def read_xml(path) -> tuple[str, np.ndarray, np.ndarray, np.ndarray, int, float | None]:
+    """TrackMate's XML: the full model file (spots in AllSpots, a track's spots from its edges, FilteredTracks
+    honoured) or "Export tracks to XML" (particles of detections, t a frame index). Returns (kind, ids, times (the
+    file's time unit converted to s; frames times the interval in the export), xy, spots in no kept track, frame
+    interval in s or None).
+    Read incrementally: a model file of a long movie is hundreds of MB."""
+    import xml.etree.ElementTree as ET
+    path = Path(path)
+    spots, edges, kept, ids, ts, xy = {}, {}, None, [], [], []
+    kind, frame_s, track, untracked, particles, to_s = None, None, None, 0, 0, 1.0
+    try:
+        for event, el in ET.iterparse(path, events=("start", "end")):
+            tag = el.tag
+            if event == "start":
+                if tag == "Tracks" and kind is None:
+                    kind = "trackmate-tracks-xml"
+                    to_s = _TIME_UNITS.get(el.get("timeUnits", "sec").lower()[:3], 1.0)
+                    frame_s = _number(el.get("frameInterval", "")) or None
+                    frame_s = frame_s * to_s if frame_s else None
+                elif tag == "Model":
+                    kind = "trackmate-xml"
+                    to_s = _TIME_UNITS.get(el.get("timeunits", "sec").lower()[:3], 1.0)
+                elif tag == "particle":
+                    track, particles = particles, particles + 1
+                elif tag == "Track":
+                    track = int(_xml_number(el, "TRACK_ID", path))
+                elif tag == "FilteredTracks":
+                    kept = set()
+                continue
+            if tag == "detection" and kind == "trackmate-tracks-xml":
+                ids.append(track)
+                ts.append(_xml_number(el, "t", path) * (frame_s or 1.0))          # t counts frames
+                xy.append((_xml_number(el, "x", path), _xml_number(el, "y", path)))
+            elif tag == "Spot":
+                t = el.get("POSITION_T")
+                spots[el.get("ID")] = (_number(t) if t is not None else None, _xml_number(el, "FRAME", path)
+                                       if t is None else None, _xml_number(el, "POSITION_X", path),
+                                       _xml_number(el, "POSITION_Y", path))
+            elif tag == "Edge":
+                for key in ("SPOT_SOURCE_ID", "SPOT_TARGET_ID"):
+                    edges.setdefault(el.get(key), track)
+            elif tag == "TrackID" and kept is not None:
+                kept.add(int(_xml_number(el, "TRACK_ID", path)))
+            elif tag == "ImageData" and frame_s is None:
+                frame_s = _number(el.get("timeinterval", "")) or None
+                frame_s = frame_s * to_s if frame_s else None
+            el.clear()
+    except FileNotFoundError:
+        raise TracksError(f"tracks file {path} not found") from None
+    except ET.ParseError as e:
+        raise TracksError(f"{path}: not readable as XML ({e})") from None
+    if kind is None:
+        raise TracksError(f"{path}: XML but not TrackMate's (expected a TrackMate model file or its tracks export)")
+    if kind == "trackmate-xml":
+        for sid, (t, frame, x, y) in spots.items():
+            k = edges.get(sid)
+            if k is None or (kept is not None and k not in kept):
+                untracked += 1
+                continue
+            ids.append(k)
+            ts.append(t * to_s if t is not None else frame * (frame_s or 1.0))
+            xy.append((x, y))
+    if not ids:
+        raise TracksError(f"{path}: no spot belongs to a track")
+    return kind, np.asarray(ids), np.asarray(ts, float), np.asarray(xy, float), untracked, frame_s
+
+
 def read_table(path) -> tuple[str, np.ndarray, np.ndarray, np.ndarray, int]:
     """(kind, track ids, times in the file's unit, xy in the file's unit, rows without a track): TrackMate's spots
     table (its extra header rows skipped) or a plain CSV of track, time, x, y."""
@@ -161,7 +239,11 @@ def read_tracks(path, *, pixel_um: float | None = None, frame_s: float | None = 
         raise TracksError(f"frame interval {frame_s!r} s: expected a positive number, e.g. 30")
     if time_unit not in ("s", "min", "frame"):
         raise TracksError(f"time unit {time_unit!r}: expected s, min or frame")
-    kind, ids, ts, xy, untracked = read_table(path)
+    if str(path).lower().endswith(".xml"):
+        kind, ids, ts, xy, untracked, xml_frame_s = read_xml(path)
+        frame_s = frame_s or xml_frame_s
+    else:
+        kind, ids, ts, xy, untracked = read_table(path)
     if time_unit == "frame":
         if frame_s is None:
             raise TracksError(f"{path}: times given in frames need the frame interval (frame_s, e.g. 30 s)")
