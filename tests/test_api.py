@@ -189,6 +189,10 @@ BAD_CALLS = [
     ("run_scene", lambda tm: tm.run_scene("S1"), r"run_scene\(scene\): expected a Scene, e.g. tm.load_scene"),
     ("run_sweep", lambda tm: tm.run_sweep("/nonexistent.toml"), r"sweep file /nonexistent.toml not found"),
     ("drive", lambda tm: tm.drive(None, 5), r"drive\(sim, n_steps\): expected a Simulation"),
+    ("read_tracks", lambda tm: tm.read_tracks("/nonexistent.csv"), r"tracks file /nonexistent.csv not found"),
+    ("read_tracks", lambda tm: tm.read_tracks("x.csv", pixel_um=-1), r"pixel size -1 µm: expected a positive"),
+    ("tracks_report", lambda tm: tm.tracks_report("x.csv", v_b=-1), r"v_b \(--v-b\) = -1: expected the free"),
+    ("tracks_report", lambda tm: tm.tracks_report("x.csv", against=["/nonexistent"]), r"/nonexistent: no such"),
 ]
 
 

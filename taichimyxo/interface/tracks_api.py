@@ -145,9 +145,9 @@ def tracks_report(path, *, pixel_um: float | None = None, frame_s: float | None 
     say = progress or (lambda msg: None)
     runs = find_runs(against) if against else []                 # every input checked before any work
     if v_b is not None and not v_b > 0:
-        raise SceneError(f"--v-b {v_b!r}: expected a speed above 0 in µm/min, e.g. 4")
+        raise SceneError(f"tracks: v_b (--v-b) = {v_b!r}: expected the free-cell speed above 0 in µm/min, e.g. 4")
     if n_boot < 50:
-        raise SceneError(f"--boot {n_boot}: expected at least 50 bootstrap replicates")
+        raise SceneError(f"tracks: n_boot (--boot) = {n_boot}: expected at least 50 bootstrap replicates")
     reading = dict(reading, pixel_um=pixel_um, frame_s=frame_s, time_unit=time_unit)
     tracks = load_tracks(path, **(reading if not str(path).endswith(".gsd") else {}))
     if out_dir:
