@@ -64,3 +64,54 @@ def test_a_kept_decisions_json_joins_the_runs_of_a_folder_once_each(tmp_path):
     runs = read_runs([tmp_path / "kept" / "decisions.json", tmp_path / "a", tmp_path / "b"])
     assert sorted(r["run"] for r in runs) == ["d1", "d2", "d3"]
     assert readings(runs)[0]["cells"]["S4 edge"]["n"] == 3
+
+
+def _record(records, name, scene, fraction_in_aggregates, seed=1, rigidity=None):
+    """A figure record (taichimyxo/figures/records.py) of `scene` whose analysis holds known series: four frames, one
+    aggregate track of 40 cells in the last two, its rigidity series only when given."""
+    import numpy as np
+    series = {"time_min": [3.0, 4.0], "n_cells": [40, 40]}
+    if rigidity is not None:
+        series["rigidity_exponent"] = rigidity
+    analysis = {"meta": {"n_cells": 100, "v_b_um_per_min": 4.0},
+                "timeseries": {"time_min": [1.0, 2.0, 3.0, 4.0], "n_aggregates": [0, 0, 1, 1],
+                               "fraction_in_aggregates": [0.0, 0.0, 0.4, fraction_in_aggregates],
+                               "speed_p95_um_per_min": [4.0] * 4, "free_cell_speed_um_per_min": [4.4] * 4},
+                "tracks": [{"id": 0, "series": series}]}
+    summary = {"seed": seed, "completed": True, "fingerprint": scene.fingerprint(),
+               "scene_values": {"run": {"hours": scene.hours}}}
+    path = records / "S3Fig.half" / f"{name}.npz"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    np.savez(path, version=np.array(1), **{f"{k}_json": np.frombuffer(json.dumps(v).encode(), np.uint8)
+                                           for k, v in (("meta", {}), ("analysis", analysis), ("summary", summary))})
+    return path
+
+
+def test_a_run_a_figure_record_holds_is_read_from_it_and_only_a_record_of_the_same_physics(tmp_path, capsys):
+    _run(tmp_path, "done", "S7", {}, 2, 0.9, 0.5)                                  # finished here: read as it is
+    for name, over in (("rigid", {}), ("slender", {"cell.drag_ratio_normal": 2.0})):
+        d = tmp_path / "runs" / name
+        d.mkdir(parents=True)
+        nested = {"cell": {"drag_ratio_normal": 2.0}} if over else {}
+        nested["run"] = {"seed": 1}
+        (d / "scene.toml").write_text(to_toml(Scene.load("S7", nested)))
+        (d / "point.json").write_text(json.dumps({"overrides": {"scene": "S7", **over}, "seed": 1}))
+    records = tmp_path / "records"
+    _record(records, "scene=S3FigD_seed=1", Scene.load("S3FigD", {"run": {"seed": 1}}), 0.9)   # = S7, default drag
+    _record(records, "scene=S3FigD_seed=2", Scene.load("S3FigD", {"run": {"seed": 2}}), 0.1)   # another seed
+    assert sorted(r["run"] for r in read_runs([tmp_path])) == ["done"]                # without records: unfinished
+    runs = {r["run"]: r for r in read_runs([tmp_path], records)}
+    assert sorted(runs) == ["done", "rigid"]                      # no record holds drag 2; seed 2's is not seed 1's
+    m = runs["rigid"]["measures"]
+    assert m["fraction_in_aggregates"] == pytest.approx(0.9)      # the last quarter: the fourth frame
+    assert m["aggregate_cells"] == pytest.approx(40.0) and m["free_cell_speed_vb"] == pytest.approx(1.1)
+    assert m["edge_speed_vb"] is None and m["self_curled"] is None      # a record keeps no edge series, no frames
+    assert m["rigid_fraction"] is None                            # no rigidity series: not measurable, not 0
+    assert runs["rigid"]["record"] == "S3Fig.half/scene=S3FigD_seed=1.npz"
+    assert runs["rigid"]["values"]["cell.drag_ratio_normal"] == 0.5
+    _record(records, "scene=S3FigD_seed=1", Scene.load("S3FigD", {"run": {"seed": 1}}), 0.9, rigidity=[1.0, 0.2])
+    assert read_runs([tmp_path], records)[1]["measures"]["rigid_fraction"] == pytest.approx(0.0)   # 0.2 < 0.5
+    assert main(["decisions", str(tmp_path), "--records", str(records), "--out", str(tmp_path / "t")]) == 0
+    assert "2 finished runs" in capsys.readouterr().out
+    assert main(["decisions", str(tmp_path), "--records", str(tmp_path / "nowhere"), "--out", str(tmp_path / "t")]) != 0
+    assert "--records" in capsys.readouterr().err

@@ -9,7 +9,8 @@ the names of their points: a point of one grid that is another's default counts 
 decision D when every other decision key holds its base scene's value; the drag ratio and self-following are also
 read together (the matrix). Each cell of the table is one claim's measure (``CLAIMS``) on one scene, mean ± SD over
 the seeds with their count. ``write_decisions(roots, out)`` writes ``decisions.md`` / ``.csv`` / ``.json``; the
-command line is ``python -m taichimyxo decisions DIR [DIR ...] [--out DIR]``.
+command line is ``python -m taichimyxo decisions DIR [DIR ...] [--records FOLDER] [--out DIR]`` (with --records, a
+run a figure already made is read from its record instead of being run again: read_record_run).
 
 The measures per run, each over the last quarter of the analysed frames (as the sweep table's outcomes,
 taichimyxo/sweep/collect.py): edge speed / v_b and the fraction of cells in rotating aggregates (the run's
@@ -72,14 +73,17 @@ def _scene_name(run_dir: Path, point: dict) -> str:
 
 def rigid_fraction(analysis: dict) -> float | None:
     """Fraction of the population's cells in aggregates rotating rigidly by their speed profile, mean over the last
-    quarter of the analysed frames (None without frames)."""
+    quarter of the analysed frames (None without frames, or when the tracks carry no rigidity series)."""
     times = analysis.get("timeseries", {}).get("time_min") or []
     n = analysis.get("meta", {}).get("n_cells")
     if not times or not n:
         return None
+    tracks = analysis.get("tracks", [])
+    if tracks and not any("rigidity_exponent" in tr.get("series", {}) for tr in tracks):
+        return None                     # an analysis (or a record of one) older than the rigidity series
     late = sorted(times)[int(0.75 * len(times)):] or sorted(times)[-1:]
     count = {t: 0 for t in late}
-    for tr in analysis.get("tracks", []):
+    for tr in tracks:
         s = tr["series"]
         for t, k, a in zip(s["time_min"], s["n_cells"], s.get("rigidity_exponent") or [None] * len(s["time_min"])):
             if t in count and a is not None and a >= RIGID_EXPONENT:
@@ -128,9 +132,47 @@ def read_run(run_dir: Path) -> dict | None:
             "measures": measures, "run": run_dir.name}
 
 
-def read_runs(roots) -> list[dict]:
+def read_record_run(run_dir: Path, records: Path) -> dict | None:
+    """An unfinished sweep run whose physics a figure record already holds (taichimyxo/figures/records.py: the same
+    scene fingerprint, seed included, and duration, completed): its measures from the record's analysis summary, by
+    the same outcomes() a finished run's result holds. A record keeps each aggregate track's cell counts and
+    rigidity, not its radius or edge speed, nor the trajectory: edge speed, radius and self-curling are None."""
+    from types import SimpleNamespace
+
+    from ..figures.records import Record, shared_record
+    from ..io.scene import Scene
+    from ..sweep.collect import outcomes
+    try:
+        point = json.loads((run_dir / "point.json").read_text())
+        scene_values = tomllib.loads((run_dir / "scene.toml").read_text())
+        scene = Scene.from_dict(scene_values)
+    except (OSError, ValueError):
+        return None
+    path = shared_record(records, SimpleNamespace(scene=scene), first=False)
+    if path is None:
+        return None
+    rec = Record(path)
+    analysis = rec.analysis
+    if not analysis:
+        return None
+    values = {}
+    for key in DECISIONS:
+        sec, k = key.split(".")
+        values[key] = scene_values.get(sec, {}).get(k)
+    oc = outcomes(analysis)
+    measures = {m: oc.get(m) for m in ("edge_speed_vb", "fraction_in_aggregates", "n_aggregates",
+                                       "aggregate_cells", "free_cell_speed_vb")}
+    measures["rigid_fraction"] = rigid_fraction(analysis)
+    measures["self_curled"] = None
+    return {"scene": _scene_name(run_dir, point), "seed": (rec.summary or {}).get("seed"), "values": values,
+            "measures": measures, "run": run_dir.name, "record": f"{path.parent.name}/{path.name}"}
+
+
+def read_runs(roots, records=None) -> list[dict]:
     """The finished runs under each sweep folder, or kept in a decisions.json an earlier table wrote (so a study
-    finished over several machines or sessions joins its parts); a run found twice counts once."""
+    finished over several machines or sessions joins its parts); a run found twice counts once. With `records` (a
+    figures' records folder, docs/figures/records), a sweep run not finished here whose physics a record holds is
+    read from the record (read_record_run)."""
     out: dict = {}
     for root in roots:
         root = Path(root)
@@ -148,6 +190,8 @@ def read_runs(roots) -> list[dict]:
                                     f"decisions.json")
         for d in sorted(runs.iterdir()):
             r = read_run(d) if d.is_dir() else None
+            if r is None and records is not None and d.is_dir():
+                r = read_record_run(d, Path(records))
             if r is not None:
                 out[r["run"]] = r
     return list(out.values())
@@ -268,8 +312,11 @@ def to_csv(rows: list[dict]) -> str:
     return buf.getvalue()
 
 
-def write_decisions(roots, out) -> dict:
-    runs = read_runs(roots)
+def write_decisions(roots, out, records=None) -> dict:
+    if records is not None and not Path(records).is_dir():
+        raise FileNotFoundError(f"--records {records}: no such folder (a figures' records folder, docs/figures/"
+                                f"records)")
+    runs = read_runs(roots, records)
     if not runs:
         raise FileNotFoundError(f"no finished runs under {', '.join(map(str, roots))}")
     rows = readings(runs)

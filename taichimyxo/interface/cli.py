@@ -119,6 +119,8 @@ def _build_parser() -> argparse.ArgumentParser:
                        "claim, mean ± SD over seeds; docs/decisions.md)")
     d.add_argument("folders", nargs="+", metavar="DIR", help="a decision sweep's --out folder (sweeps/decisions.toml, "
                    "sweeps/decisions_dense.toml), or a decisions.json an earlier table wrote (its runs join)")
+    d.add_argument("--records", metavar="FOLDER", help="a figures' records folder (docs/figures/records): a sweep run "
+                   "not finished in DIR whose physics a record holds is read from it")
     d.add_argument("--out", default=".", help="folder for decisions.md/.csv/.json (default: current folder)")
 
     v = sub.add_parser("videos", help="regenerate the supplementary videos S1-S17")
@@ -321,7 +323,7 @@ def cmd_claims(args) -> int:
 def cmd_decisions(args) -> int:
     from ..analysis.decisions import write_decisions
     try:
-        res = write_decisions(args.folders, args.out)
+        res = write_decisions(args.folders, args.out, args.records)
     except FileNotFoundError as e:
         raise SceneError(str(e)) from None
     print(open(os.path.join(res["out"], "decisions.md")).read(), end="")

@@ -64,7 +64,9 @@ def outcomes(analysis: dict) -> dict:
     cells, radius, edge = [], [], []
     for tr in analysis.get("tracks", []):
         s = tr["series"]
-        for tm, n, r, e in zip(s["time_min"], s["n_cells"], s["radius_um"], s["edge_speed_um_per_min"]):
+        none = [None] * len(s["time_min"])        # a figure record keeps no radius or edge series (figures/records.py)
+        for tm, n, r, e in zip(s["time_min"], s["n_cells"], s.get("radius_um") or none,
+                               s.get("edge_speed_um_per_min") or none):
             if tm >= t_from - 1e-9:
                 cells.append(n)
                 radius.append(r)
