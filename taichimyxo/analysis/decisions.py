@@ -136,7 +136,9 @@ def read_record_run(run_dir: Path, records: Path) -> dict | None:
     """An unfinished sweep run whose physics a figure record already holds (taichimyxo/figures/records.py: the same
     scene fingerprint, seed included, and duration, completed): its measures from the record's analysis summary, by
     the same outcomes() a finished run's result holds. A record keeps each aggregate track's cell counts and
-    rigidity, not its radius or edge speed, nor the trajectory: edge speed, radius and self-curling are None."""
+    rigidity, not its radius or edge speed, nor the trajectory: edge speed, radius and self-curling are None. The
+    free cells' speed is None too: the committed records' analyses predate the rule that a cell curled onto its own
+    tail is not free (docs/CHANGELOG.md), while the aggregate finder the other measures come from is unchanged."""
     from types import SimpleNamespace
 
     from ..figures.records import Record, shared_record
@@ -161,9 +163,8 @@ def read_record_run(run_dir: Path, records: Path) -> dict | None:
         values[key] = scene_values.get(sec, {}).get(k)
     oc = outcomes(analysis)
     measures = {m: oc.get(m) for m in ("edge_speed_vb", "fraction_in_aggregates", "n_aggregates",
-                                       "aggregate_cells", "free_cell_speed_vb")}
-    measures["rigid_fraction"] = rigid_fraction(analysis)
-    measures["self_curled"] = None
+                                       "aggregate_cells")}
+    measures.update(rigid_fraction=rigid_fraction(analysis), self_curled=None, free_cell_speed_vb=None)
     return {"scene": _scene_name(run_dir, point), "seed": (rec.summary or {}).get("seed"), "values": values,
             "measures": measures, "run": run_dir.name, "record": f"{path.parent.name}/{path.name}"}
 
