@@ -12,46 +12,34 @@ state is where a run spends its late hours (benchmarks/states.py). Rates, never 
 """
 from __future__ import annotations
 
-import json
 import os
-import subprocess
 import sys
 
-from benchlib import HERE, parser, time_steps, write_csv
+from benchlib import HERE, json_from_worker, parser, time_steps, write_csv
 
 STATE_WORKER = r"""
-import json, sys, time
+import json, sys
 sys.path.insert(0, sys.argv[1])
 from taichimyxo.runtime import backend
 backend.init("cpu", int(sys.argv[4]))
-import taichi as ti
-from taichimyxo.interface.bench import scaled_scene
+from taichimyxo.interface.bench import scaled_scene, time_steps
 from taichimyxo.runtime.simulation import Simulation
 import states
 scene, area, start = states.load(sys.argv[2])
 sc = scaled_scene(scene, area, {**states.STATE_RUN.get(sys.argv[2], {}), "skin_um": float(sys.argv[3])})
 sim = Simulation.from_positions(sc, start[0], start[1])
-sim.advance(200)
-ti.sync()
-r0 = sim.rebuilds
-t = time.perf_counter()
-sim.advance(int(sys.argv[5]))
-ti.sync()
-w = time.perf_counter() - t
-print(json.dumps({"ms_per_step": round(1e3 * w / int(sys.argv[5]), 4), "rebuilds": sim.rebuilds - r0,
-                  "partners_per_segment": round(float(sim.neighbours.nbr_n.to_numpy().mean()), 3),
-                  "list_capacity": sim.neighbours.max_nbrs, "particles": sim.n_p, "dt_ms": sc.dt * 1e3}))
+t = time_steps(sim, int(sys.argv[5]), 200)
+print(json.dumps({**t, "partners_per_segment": round(float(sim.neighbours.nbr_n.to_numpy().mean()), 3),
+                  "list_capacity": sim.neighbours.max_nbrs, "dt_ms": sc.dt * 1e3}))
 """
 
 
 def measure_state(state: str, skin: float, steps: int, threads: int) -> dict:
     """One (state, skin) in its own process: ms/step over `steps` steps after 200 (compiling, the first builds)."""
-    p = subprocess.run([sys.executable, "-c", STATE_WORKER, str(HERE), state, str(skin), str(threads), str(steps)],
-                       capture_output=True, text=True, timeout=3600)
-    line = next((x for x in reversed(p.stdout.splitlines()) if x.startswith("{")), None)
-    if line is None:
-        raise SystemExit(f"skin: the worker for {state!r} at skin {skin} failed: {(p.stderr or p.stdout)[-300:]}")
-    r = json.loads(line)
+    r = json_from_worker([sys.executable, "-c", STATE_WORKER, str(HERE), state, str(skin), str(threads), str(steps)],
+                         timeout=3600)
+    if "error" in r:
+        raise SystemExit(f"skin: the worker for {state!r} at skin {skin} failed: {r['error']}")
     return {"state": state, "skin_um": skin, "threads": threads, "steps": steps, "ms_per_step": r["ms_per_step"],
             "rebuilds_per_1000_steps": round(1e3 * r["rebuilds"] / steps, 2),
             "partners_per_segment": r["partners_per_segment"], "list_capacity": r["list_capacity"],
