@@ -36,6 +36,8 @@ BENCHMARKS = {
                  "docs/measures.md, Cost"),
     "accuracy": ("accuracy", "each method against a converged reference, and its cost per simulated hour",
                  "benchmarks/results/ACCURACY.md"),
+    "accuracy_cost": ("accuracy", "wall time of a 6 h paper-scale S3 against step and integrator, with the outcome "
+                      "check's verdict on each point", "benchmarks/results/accuracy_cost.md"),
     "accuracy_outcomes": ("accuracy", "whether a larger step changes what a user measures (sweep outcomes)",
                           "benchmarks/results/accuracy_outcomes.md"),
     "stability_sweep": ("accuracy", "the largest stable step per integrator over the stiffness grid",

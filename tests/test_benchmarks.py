@@ -134,3 +134,19 @@ def test_the_suite_lists_every_benchmark_of_the_folder_and_refuses_an_unknown_on
     assert all(f"  {n} " in out for n in suite.present())
     assert suite.main(["no_such_benchmark"]) == 2
     assert "unknown benchmark 'no_such_benchmark'" in capsys.readouterr().err
+
+
+def test_accuracy_cost_reads_each_step_verdict_from_an_outcome_check(tmp_path):
+    """The verdicts of benchmarks/accuracy_cost.py come from an outcome check's summary lines: the reference, each
+    (integrator, step) that agrees or differs, and nothing for a setting with other keys (a controller)."""
+    cost = _benchmark("accuracy_cost")
+    md = tmp_path / "outcomes.md"
+    md.write_text('Reference: {"run.dt_ms": 2}. Agrees: ...\n\n'
+                  '- {"run.dt_ms": 3}: agrees with the reference on every outcome\n'
+                  '- {"run.dt_ms": 5}: outside the reference\'s seed range on edge_speed_vb\n'
+                  '- {"run.dt_ms": 8, "run.integrator": "imex-explicit"}: agrees with the reference on every outcome\n'
+                  '- {"run.step_control": "error", "run.step_tolerance_um": 0.001}: agrees with the reference\n')
+    v = cost.verdicts(md)
+    assert v == {("explicit", 2.0): "reference", ("explicit", 3.0): "agrees", ("explicit", 5.0): "differs",
+                 ("imex-explicit", 8.0): "agrees"}
+    assert cost.verdicts(tmp_path / "missing.md") == {}
