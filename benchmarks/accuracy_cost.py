@@ -56,7 +56,6 @@ def verdicts(path: Path = OUTCOMES) -> dict:
 
 def worker(integrator: str, dt_ms: float, steps: int, threads: int) -> None:
     from states import load
-
     from taichimyxo.interface.bench import measure
     from taichimyxo.runtime import backend
     backend.init("cpu", threads)
