@@ -6,7 +6,7 @@ point marked with what the outcome check says of it (docs/performance.md, "What 
 Each (integrator, step) is timed in its own process on the late benchmark state (benchmarks/states.py: the
 paper-scale S3 as its 6 h run ends), `--steps` steps after a warm-up, and projected to 6 simulated hours at that
 cost per step: the late state is what most of a run's hours cost, so the projection is an upper bound (the one real
-run, `real_runs` below, says by how much). The verdicts are read from the committed outcome checks of S3
+run, `REAL_RUNS` below, says by how much). The verdicts are read from the committed outcome checks of S3
 (benchmarks/results/accuracy_outcomes.md: half-scale S3, 1 h, six seeds a side against the 2 ms reference): agrees,
 differs, or not checked. Writes accuracy_cost.csv, accuracy_cost.md and accuracy_cost.png.
 """
