@@ -7,7 +7,7 @@ Each (integrator, step) is timed in its own process on the late benchmark state 
 paper-scale S3 as its 6 h run ends), `--steps` steps after a warm-up, and projected to 6 simulated hours at that
 cost per step: the late state is what most of a run's hours cost, so the projection is an upper bound (the one real
 run, `REAL_RUNS` below, says by how much). The verdicts are read from the committed outcome checks of S3
-(benchmarks/results/accuracy_outcomes.md: half-scale S3, 1 h, six seeds a side against the 2 ms reference): agrees,
+(benchmarks/results/accuracy_outcomes.csv: half-scale S3, 1 h, six seeds a side against the 2 ms reference): agrees,
 differs, or not checked. Writes accuracy_cost.csv, accuracy_cost.md and accuracy_cost.png.
 """
 from __future__ import annotations
@@ -15,7 +15,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import re
 import sys
 from pathlib import Path
 
@@ -26,31 +25,34 @@ from benchlib import HERE, json_from_worker, parser, write_csv
 METHODS = [("explicit", 2.0), ("explicit", 3.0), ("explicit", 4.0), ("explicit", 5.0),
            ("imex-explicit", 4.0), ("imex-explicit", 6.0), ("imex-explicit", 8.0),
            ("imex", 10.0), ("imex", 20.0)]
-OUTCOMES = HERE / "results" / "accuracy_outcomes.md"
+OUTCOMES = HERE / "results" / "accuracy_outcomes.csv"
 # real 6 h paper-scale S3 runs through the CLI: (integrator, step ms, wall minutes, where it is recorded)
 REAL_RUNS = [("explicit", 4.0, 264.0, "docs/figures.md (the figures' paper-scale S3, 2 cores)")]
 SIM_HOURS = 6.0
 
 
 def verdicts(path: Path = OUTCOMES) -> dict:
-    """{(integrator, dt_ms): 'reference' | 'agrees' | 'differs'} from an outcome check's summary lines."""
-    out = {}
+    """{(integrator, dt_ms): 'reference' | 'agrees' | 'differs'} by accuracy_outcomes.compare on the runs of an
+    outcome check's CSV: the reference is its smallest explicit step, as accuracy_outcomes chooses it; a setting with
+    other keys (a step controller, another scene) is not a point of this plot."""
+    import accuracy_outcomes
     if not path.is_file():
-        return out
-    text = path.read_text()
-    m = re.search(r"Reference: (\{.*?\})\.", text)
-    if m:
-        ref = json.loads(m.group(1))
-        out[(ref.get("run.integrator", "explicit"), float(ref["run.dt_ms"]))] = "reference"
-    for line in text.splitlines():
-        m = re.match(r"- (\{.*?\}): (.*)", line)
-        if not m:
-            continue
-        setting = json.loads(m.group(1))
-        if "run.dt_ms" not in setting or set(setting) - {"run.dt_ms", "run.integrator"}:
-            continue                      # a controller or another scene's key: not a point of this plot
-        key = (setting.get("run.integrator", "explicit"), float(setting["run.dt_ms"]))
-        out[key] = "agrees" if m.group(2).startswith("agrees") else "differs"
+        return {}
+    rows = accuracy_outcomes.read_rows(path)
+    points = {}
+    for setting in dict.fromkeys(r["setting"] for r in rows):
+        keys = json.loads(setting)
+        if "run.dt_ms" in keys and not set(keys) - {"run.dt_ms", "run.integrator"}:
+            points[setting] = (keys.get("run.integrator", "explicit"), float(keys["run.dt_ms"]))
+    explicit = [s for s, (integ, _) in points.items() if integ == "explicit"]
+    if not explicit:
+        return {}
+    reference = min(explicit, key=lambda s: points[s][1])
+    cmp = accuracy_outcomes.compare([r for r in rows if r["setting"] in points], reference)
+    out = {points[reference]: "reference"}
+    for setting, key in points.items():
+        if setting != reference:
+            out[key] = "differs" if any(c["agrees"] is False for c in cmp if c["setting"] == setting) else "agrees"
     return out
 
 

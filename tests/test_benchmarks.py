@@ -137,16 +137,24 @@ def test_the_suite_lists_every_benchmark_of_the_folder_and_refuses_an_unknown_on
 
 
 def test_accuracy_cost_reads_each_step_verdict_from_an_outcome_check(tmp_path):
-    """The verdicts of benchmarks/accuracy_cost.py come from an outcome check's summary lines: the reference, each
-    (integrator, step) that agrees or differs, and nothing for a setting with other keys (a controller)."""
+    """The verdicts of benchmarks/accuracy_cost.py are accuracy_outcomes' comparison of an outcome check's runs: the
+    smallest explicit step is the reference, a step whose seed mean leaves the reference's seed range on an outcome
+    differs, one within it on every outcome agrees, and a setting with other keys (a controller) is no point."""
+    import csv
     cost = _benchmark("accuracy_cost")
-    md = tmp_path / "outcomes.md"
-    md.write_text('Reference: {"run.dt_ms": 2}. Agrees: ...\n\n'
-                  '- {"run.dt_ms": 3}: agrees with the reference on every outcome\n'
-                  '- {"run.dt_ms": 5}: outside the reference\'s seed range on edge_speed_vb\n'
-                  '- {"run.dt_ms": 8, "run.integrator": "imex-explicit"}: agrees with the reference on every outcome\n'
-                  '- {"run.step_control": "error", "run.step_tolerance_um": 0.001}: agrees with the reference\n')
-    v = cost.verdicts(md)
+    edge = {'{"run.dt_ms": 2}': [1.5, 1.6, 1.7], '{"run.dt_ms": 3}': [1.55, 1.6, 1.65],
+            '{"run.dt_ms": 5}': [2.0, 2.1, 2.2], '{"run.dt_ms": 8, "run.integrator": "imex-explicit"}': [1.6, 1.6, 1.6],
+            '{"run.step_control": "error", "run.step_tolerance_um": 0.001}': [3.0, 3.0, 3.0]}
+    path = tmp_path / "outcomes.csv"
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, ["setting", "seed", "steps", "wall_s_per_sim_h", "n_aggregates", "edge_speed_vb"])
+        w.writeheader()
+        for setting, values in edge.items():
+            for seed, v in enumerate(values, 1):
+                w.writerow(dict(setting=setting, seed=seed, steps=100, wall_s_per_sim_h=60.0, n_aggregates=5.0,
+                                edge_speed_vb=v))
+    v = cost.verdicts(path)
     assert v == {("explicit", 2.0): "reference", ("explicit", 3.0): "agrees", ("explicit", 5.0): "differs",
                  ("imex-explicit", 8.0): "agrees"}
-    assert cost.verdicts(tmp_path / "missing.md") == {}
+    assert cost.verdicts(tmp_path / "missing.csv") == {}
+    assert set(cost.verdicts(cost.OUTCOMES).values()) <= {"reference", "agrees", "differs"}
