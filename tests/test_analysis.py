@@ -703,6 +703,37 @@ def test_a_cell_curled_onto_its_own_tail_is_not_free():
     assert ts["free_cell_speed_um_per_min"] == pytest.approx([V_B] * 3)
 
 
+def test_free_cell_speed_splits_into_the_part_along_the_body_and_the_sideways_part():
+    """Straight free cells gliding head first at v_b while a sideways force moves every particle across the body at
+    0.3 v_b (slime steering the head): the free-cell speed is their whole speed, sqrt(1 + 0.09) v_b, and its part
+    along the forward tangent is v_b; without stored velocities (speed along the tangent) the two are equal. The
+    claims row shows both."""
+    from taichimyxo.analysis.claims import evaluate
+    from taichimyxo.analysis.summary import analyze_frames
+    from taichimyxo.io.frame import Frame
+    N, W, l0 = 8, 0.5, 0.64
+    pos = np.stack([np.stack([x0 - np.arange(N) * l0, np.full(N, y0)], 1) for x0, y0 in ((10, 5), (10, 25), (30, 5))])
+    vel = np.zeros((3, N, 2), np.float32)
+    vel[..., 0] = V_B                                # head (particle 0) first, along +x
+    vel[..., 1] = 0.3 * V_B                          # across the body
+    speed = np.linalg.norm(vel, axis=-1).astype(np.float32)
+
+    def frames(with_velocity):
+        return [Frame(time_s=60.0 * k, step=k, box=(50.0, 50.0), width_um=W, positions=pos + 0.5 * k,
+                      engine_direction=np.ones(3, np.int8), particle_speed=speed,
+                      particle_velocity=vel if with_velocity else None) for k in range(3)]
+    summary = analyze_frames(frames(True), v_b=V_B)
+    ts = summary["timeseries"]
+    assert ts["n_free_cells"] == [3, 3, 3]
+    assert ts["free_cell_speed_um_per_min"] == pytest.approx([np.sqrt(1.09) * V_B] * 3, rel=1e-5)
+    assert ts["free_cell_speed_along_um_per_min"] == pytest.approx([V_B] * 3, rel=1e-5)
+    ts = analyze_frames(frames(False), v_b=V_B)["timeseries"]
+    assert ts["free_cell_speed_along_um_per_min"] == pytest.approx(ts["free_cell_speed_um_per_min"], rel=1e-5)
+    run = dict(label="S16", kind="slime", v_b=V_B, summary=summary, path="S16.gsd", scene={})
+    rows = {r["id"]: r for r in evaluate([run])}
+    assert "(along the axis 1.00" in rows["free_cell_speed"]["measured"]
+
+
 def test_claims_on_records_match_claims_on_their_trajectories(tmp_path, capsys):
     """A run kept as a record by `figures` (its last frame and the analysis made when it finished) gives the claims
     table its trajectory gives, row for row; a record made before records kept the rigidity exponents says so in the

@@ -159,3 +159,11 @@ def speed_span_min(r) -> float:
 def free_speed(r):
     ts = r["summary"]["timeseries"]
     return series_mean_se(np.asarray(ts["free_cell_speed_um_per_min"], float) / r["v_b"])
+
+
+def free_speed_along(r):
+    """free_speed's part along each particle's forward tangent (None for an analysis made before it was kept)."""
+    ts = r["summary"]["timeseries"]
+    if "free_cell_speed_along_um_per_min" not in ts:
+        return None
+    return series_mean_se(np.asarray(ts["free_cell_speed_along_um_per_min"], float) / r["v_b"])

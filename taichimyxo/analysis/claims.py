@@ -13,6 +13,8 @@ below 8 frames), "± SE over tracks" over aggregates followed in time:
 
 1. free_cell_speed: cells touching no other cell (clusters of one) nor their own tail (a curled cell's head follows
    it) move at v_b. Per run: the mean over frames of their mean speed / v_b ± SE. Consistent within 5 % (+ 2 SE) of 1.
+   Beside it, where the analysis kept it, the part of that speed along each particle's forward tangent: a force
+   across the body (slime steering the head) moves particles sideways and leaves this part at v_b.
 2. speed_p95_guided_vs_non_guided: the 95th percentile of cell speed, mean over frames / v_b ± SE. Short-range
    guiding that speeds cells up (active following, adhesion) drives cells above v_b; without guiding nothing does.
    Consistent when every active-following or adhesion run lies above every non-guided one.
@@ -67,6 +69,7 @@ from .claim_runs import (
     KINDS,
     MIN_RIGID_CELLS,
     free_speed,
+    free_speed_along,
     load_runs,
     mean_se,
     needs,
@@ -127,7 +130,12 @@ def free_cell_speed(runs, shared):
         m, se, n = shared["free_speed"][id(r)]
         nf = int(np.nansum(r["summary"]["timeseries"]["n_free_cells"]))
         vals[r["label"]] = dict(mean_vb=m, se=se, n_frames=n, free_cell_frames=nf)
-        parts.append(f"{r['label']}: {plus_minus(m, se)} v_b" if n else f"{r['label']}: no free cells")
+        along = free_speed_along(r)
+        text = f"{r['label']}: {plus_minus(m, se)} v_b" if n else f"{r['label']}: no free cells"
+        if n and along is not None and along[2]:
+            vals[r["label"]].update(along_mean_vb=along[0], along_se=along[1])
+            text += f" (along the axis {plus_minus(along[0], along[1])})"
+        parts.append(text)
     ok = [v for v in vals.values() if v["n_frames"]]
     status = ("no free cells in these runs" if not ok else
               "consistent" if all(abs(v["mean_vb"] - 1) <= 0.05 + 2 * np.nan_to_num(v["se"]) for v in ok)

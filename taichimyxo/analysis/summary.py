@@ -93,6 +93,7 @@ def analyze_frames(frames: Iterable[Frame], v_b: float = 4.0, measures=None, **p
     ts = dict(time_min=[], mean_speed_um_per_min=[], polar_order=[], nematic_order=[], local_polar_order=[],
               local_nematic_order=[], n_clusters=[], largest_cluster=[], mean_cluster_size_weighted=[],
               fraction_in_clusters=[], n_aggregates=[], fraction_in_aggregates=[], free_cell_speed_um_per_min=[],
+              free_cell_speed_along_um_per_min=[],
               n_free_cells=[], speed_p95_um_per_min=[], strain_inside_aggregates_J=[],
               strain_outside_aggregates_J=[])
     per_frame: list[list[dict]] = []
@@ -153,10 +154,15 @@ def analyze_frames(frames: Iterable[Frame], v_b: float = 4.0, measures=None, **p
             no_speed.append(geo.t_min)
             per_frame.append(None)
             ts["free_cell_speed_um_per_min"].append(float("nan"))
+            ts["free_cell_speed_along_um_per_min"].append(float("nan"))
             ts["speed_p95_um_per_min"].append(float("nan"))
             continue
         # free cells: touching no other cell (clusters of one) nor their own tail
         ts["free_cell_speed_um_per_min"].append(float(geo.cspeed[free].mean()) if free.any() else float("nan"))
+        # the part of it along each particle's own forward tangent: a force across the body (slime steering the
+        # head) moves particles sideways without changing this part (docs/measures.md, free cells)
+        ts["free_cell_speed_along_um_per_min"].append(
+            float((geo.vel[free] * geo.ptan[free]).sum(-1).mean()) if free.any() else float("nan"))
         ts["speed_p95_um_per_min"].append(float(np.percentile(geo.cspeed, 95.0)))
         for a in aggs:
             sprof[0] += a["_speed_prof"][0]
