@@ -161,9 +161,16 @@ def free_speed(r):
     return series_mean_se(np.asarray(ts["free_cell_speed_um_per_min"], float) / r["v_b"])
 
 
-def free_speed_along(r):
-    """free_speed's part along each particle's forward tangent (None for an analysis made before it was kept)."""
+def free_speed_text(r, m, se, n) -> tuple[str, dict]:
+    """The free-cell row's text for run r (its free_speed m, se over n frames) and, where the analysis kept it, the
+    part of that speed along each particle's forward tangent (docs/measures.md: slime turns heads sideways)."""
+    if not n:
+        return f"{r['label']}: no free cells", {}
+    text = f"{r['label']}: {plus_minus(m, se)} v_b"
     ts = r["summary"]["timeseries"]
-    if "free_cell_speed_along_um_per_min" not in ts:
-        return None
-    return series_mean_se(np.asarray(ts["free_cell_speed_along_um_per_min"], float) / r["v_b"])
+    if "free_cell_speed_along_um_per_min" not in ts:              # an analysis made before it was kept
+        return text, {}
+    am, ase, an = series_mean_se(np.asarray(ts["free_cell_speed_along_um_per_min"], float) / r["v_b"])
+    if not an:
+        return text, {}
+    return text + f" (along the axis {plus_minus(am, ase)})", dict(along_mean_vb=am, along_se=ase)

@@ -13,8 +13,6 @@ below 8 frames), "± SE over tracks" over aggregates followed in time:
 
 1. free_cell_speed: cells touching no other cell (clusters of one) nor their own tail (a curled cell's head follows
    it) move at v_b. Per run: the mean over frames of their mean speed / v_b ± SE. Consistent within 5 % (+ 2 SE) of 1.
-   Beside it, where the analysis kept it, the part of that speed along each particle's forward tangent: a force
-   across the body (slime steering the head) moves particles sideways and leaves this part at v_b.
 2. speed_p95_guided_vs_non_guided: the 95th percentile of cell speed, mean over frames / v_b ± SE. Short-range
    guiding that speeds cells up (active following, adhesion) drives cells above v_b; without guiding nothing does.
    Consistent when every active-following or adhesion run lies above every non-guided one.
@@ -69,7 +67,7 @@ from .claim_runs import (
     KINDS,
     MIN_RIGID_CELLS,
     free_speed,
-    free_speed_along,
+    free_speed_text,
     load_runs,
     mean_se,
     needs,
@@ -129,12 +127,8 @@ def free_cell_speed(runs, shared):
     for r in runs:
         m, se, n = shared["free_speed"][id(r)]
         nf = int(np.nansum(r["summary"]["timeseries"]["n_free_cells"]))
-        vals[r["label"]] = dict(mean_vb=m, se=se, n_frames=n, free_cell_frames=nf)
-        along = free_speed_along(r)
-        text = f"{r['label']}: {plus_minus(m, se)} v_b" if n else f"{r['label']}: no free cells"
-        if n and along is not None and along[2]:
-            vals[r["label"]].update(along_mean_vb=along[0], along_se=along[1])
-            text += f" (along the axis {plus_minus(along[0], along[1])})"
+        text, along = free_speed_text(r, m, se, n)      # and the part along the body, where kept (docs/measures.md)
+        vals[r["label"]] = dict(mean_vb=m, se=se, n_frames=n, free_cell_frames=nf, **along)
         parts.append(text)
     ok = [v for v in vals.values() if v["n_frames"]]
     status = ("no free cells in these runs" if not ok else
