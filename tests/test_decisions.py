@@ -48,6 +48,24 @@ def test_readings_sort_runs_by_their_resolved_values_and_give_mean_and_sd_over_s
     assert (tmp_path / "t" / "decisions.csv").read_text().count("S4 edge") == 4
 
 
+def test_the_two_suppression_rules_are_read_together_as_the_drag_and_self_following_are(tmp_path):
+    """S15's rules in every combination: each rule alone is its one-at-a-time row, and the two changed together is a
+    matrix row of its own (its runs in no other row)."""
+    c, w = "reversals.suppression_contacts", "reversals.suppressed_wait"
+    for s in (1, 2):
+        _run(tmp_path, f"d{s}", "S15", {}, s, 1.0, 0.5)
+        _run(tmp_path, f"h{s}", "S15", {c: "head"}, s, 1.0, 0.7)
+        _run(tmp_path, f"e{s}", "S15", {w: "contact_end"}, s, 1.0, 0.6)
+        _run(tmp_path, f"b{s}", "S15", {c: "head", w: "contact_end"}, s, 1.0, 0.9)
+    rows = {r["reading"]: r["cells"]["S15 in aggregates"] for r in readings(read_runs([tmp_path]))}
+    assert rows["default"]["mean"] == pytest.approx(0.5)
+    assert rows["contacts that hold a reversal = head"]["mean"] == pytest.approx(0.7)
+    assert rows["a held reversal waits = contact_end"]["mean"] == pytest.approx(0.6)
+    both = rows["contacts that hold a reversal = head, a held reversal waits = contact_end"]
+    assert (both["mean"], both["n"]) == (pytest.approx(0.9), 2)
+    assert sum(r is not None for r in rows.values()) == 4                    # the repeats of those rows dropped
+
+
 def test_rigid_fraction_counts_cells_of_rigidly_rotating_aggregates_over_the_last_quarter():
     tracks = [{"series": {"time_min": [3.0, 4.0], "n_cells": [10, 20], "rigidity_exponent": [0.9, 1.0]}},
               {"series": {"time_min": [4.0], "n_cells": [30], "rigidity_exponent": [0.1]}},       # cells at v_b

@@ -6,11 +6,12 @@ claims it bears on.
 runs an earlier table kept in its ``decisions.json``) and sorts
 them by their base scene and by the values their resolved scenes hold for the decision keys (``DECISIONS``), not by
 the names of their points: a point of one grid that is another's default counts for both. A run is a reading of
-decision D when every other decision key holds its base scene's value; the drag ratio and self-following are also
-read together (the matrix). Each cell of the table is one claim's measure (``CLAIMS``) on one scene, mean ± SD over
-the seeds with their count. ``write_decisions(roots, out)`` writes ``decisions.md`` / ``.csv`` / ``.json``; the
-command line is ``python -m taichimyxo decisions DIR [DIR ...] [--records FOLDER] [--out DIR]`` (with --records, a
-run a figure already made is read from its record instead of being run again: read_record_run).
+decision D when every other decision key holds its base scene's value; the drag ratio and self-following, and the two
+suppression rules, are also read together (``MATRICES``). Each cell of the table is one claim's measure (``CLAIMS``)
+on one scene, mean ± SD over the seeds with their count. ``write_decisions(roots, out)`` writes ``decisions.md`` /
+``.csv`` / ``.json``; the command line is ``python -m taichimyxo decisions DIR [DIR ...] [--records FOLDER] [--out
+DIR]`` (with --records, a run a figure already made is read from its record instead of being run again:
+read_record_run).
 
 The measures per run, each over the last quarter of the analysed frames (as the sweep table's outcomes,
 taichimyxo/sweep/collect.py): edge speed / v_b and the fraction of cells in rotating aggregates (the run's
@@ -44,7 +45,9 @@ DECISIONS = {
     "reversals.suppression_contacts": "contacts that hold a reversal",
     "reversals.suppressed_wait": "a held reversal waits",
 }
-MATRIX = ("cell.drag_ratio_normal", "guiding.self")
+# decisions read together, each pair in every combination: drag x self-following, and the two suppression rules
+MATRICES = (("cell.drag_ratio_normal", "guiding.self"),
+            ("reversals.suppression_contacts", "reversals.suppressed_wait"))
 
 # (column id, scene, measure, what the paper says): the claims the decisions bear on
 CLAIMS = [
@@ -217,7 +220,7 @@ def _fmt(v) -> str:
 
 
 def readings(runs: list[dict]) -> list[dict]:
-    """The table's rows: the default, each decision's other readings, and the drag x self matrix; each with the
+    """The table's rows: the default, each decision's other readings, and each pair of MATRICES; each with the
     statistic of every claim column over the runs of that reading."""
     base = {s: defaults_of(s) for s in {r["scene"] for r in runs}}
 
@@ -245,10 +248,10 @@ def readings(runs: list[dict]) -> list[dict]:
             if all(base[s][key] == v for s in base):
                 continue
             add(f"{DECISIONS[key]} = {_fmt(v)}", key, {key: v})
-    a, b = MATRIX
-    for va in sorted({r["values"][a] for r in runs}):
-        for vb in sorted({r["values"][b] for r in runs}):
-            add(f"{DECISIONS[a]} = {_fmt(va)}, {DECISIONS[b]} = {_fmt(vb)}", "matrix", {a: va, b: vb})
+    for a, b in MATRICES:
+        for va in sorted({r["values"][a] for r in runs}, key=str):
+            for vb in sorted({r["values"][b] for r in runs}, key=str):
+                add(f"{DECISIONS[a]} = {_fmt(va)}, {DECISIONS[b]} = {_fmt(vb)}", "matrix", {a: va, b: vb})
     # the matrix repeats the default and the one-at-a-time rows where they coincide: keep the first of each
     out, seen_rows = [], set()
     for row in rows:
