@@ -156,9 +156,10 @@ def speed_span_min(r) -> float:
     return float(t1 - max(t0, first))
 
 
-def free_speed(r):
+def free_speed(r, series: str = "free_cell_speed_um_per_min"):
+    """A free-cell speed series of run r / v_b: (mean, SE, frames) over its frames."""
     ts = r["summary"]["timeseries"]
-    return series_mean_se(np.asarray(ts["free_cell_speed_um_per_min"], float) / r["v_b"])
+    return series_mean_se(np.asarray(ts[series], float) / r["v_b"])
 
 
 def free_speed_text(r, m, se, n) -> tuple[str, dict]:
@@ -170,7 +171,7 @@ def free_speed_text(r, m, se, n) -> tuple[str, dict]:
     ts = r["summary"]["timeseries"]
     if "free_cell_speed_along_um_per_min" not in ts:              # an analysis made before it was kept
         return text, {}
-    am, ase, an = series_mean_se(np.asarray(ts["free_cell_speed_along_um_per_min"], float) / r["v_b"])
+    am, ase, an = free_speed(r, "free_cell_speed_along_um_per_min")
     if not an:
         return text, {}
     return text + f" (along the axis {plus_minus(am, ase)})", dict(along_mean_vb=am, along_se=ase)
