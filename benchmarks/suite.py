@@ -49,6 +49,8 @@ BENCHMARKS = {
     "compare_runs": ("changes", "the last frames of two runs of one scene and seed, side by side", "a PNG where asked"),
     "rigid_body_check": ("physics", "pre-formed aggregates against the rigid-body model of the edge speed (S2 Text)",
                          "benchmarks/results/rigid_body_check.md"),
+    "aggregate_balance": ("physics", "why a run's aggregates turn at their edge speed: the torque balance, factor "
+                          "by factor from the rigid-body model's disk", "benchmarks/results/aggregate_balance.md"),
     "tracks_validation": ("physics", "the mechanism report on degraded tracks of simulated runs",
                           "benchmarks/results/tracks_validation.md"),
     "lab_example": ("physics", "the mechanism report on a public data set of M. xanthus tracks (downloaded)",

@@ -158,3 +158,33 @@ def test_accuracy_cost_reads_each_step_verdict_from_an_outcome_check(tmp_path):
                  ("imex-explicit", 8.0): "agrees"}
     assert cost.verdicts(tmp_path / "missing.csv") == {}
     assert set(cost.verdicts(cost.OUTCOMES).values()) <= {"reference", "agrees", "differs"}
+
+
+def test_aggregate_balance_refuses_a_missing_trajectory_by_name(tmp_path, capsys):
+    """benchmarks/aggregate_balance.py: a trajectory that is not there is one line naming it and exit status 2,
+    before any table is written."""
+    mod = _benchmark("aggregate_balance")
+    out = tmp_path / "table.md"
+    assert mod.main([str(tmp_path / "no.gsd"), "--out", str(out)]) == 2
+    assert "no trajectory" in capsys.readouterr().err and not out.exists()
+
+
+def test_aggregate_balance_finds_a_rigid_disk_of_cells_along_circles_turning_rigidly(tmp_path):
+    """End to end on a synthetic trajectory with a known answer: a disk of arcs turning rigidly (analysis/
+    synthetic.py) is found, its cells lie along their circles (engines' torque that of cells along circles), it turns
+    as the torque of its velocities says (rotation 1) and its edge keeps up with the rotation (edge profile 1)."""
+    from taichimyxo.analysis.synthetic import write_synthetic
+    mod = _benchmark("aggregate_balance")
+    path = tmp_path / "disk.gsd"
+    write_synthetic(str(path), scene={"guiding": {"kind": "adhesion"}}, box=(60.0, 60.0), n_frames=2,
+                    disks=[dict(centre=(30.0, 30.0), radius=8.0, omega=0.6)])
+    scene, P, n, rows = mod.run_rows(path, 0.0, 1)
+    assert n == 2 and P["kind"] == "adhesion" and len(rows) == 2
+    for r in rows:
+        assert r["alignment_torque"] == pytest.approx(1.0, abs=0.02)
+        assert r["rotation"] == pytest.approx(1.0, abs=0.02)
+        assert r["edge_profile"] == pytest.approx(1.0, abs=0.03)
+        assert r["against"] == 0.0 and abs(r["adhesion_outside"]) < 1e-9
+    out = tmp_path / "table.md"
+    assert mod.main([str(path), "--out", str(out), "--start-fraction", "0"]) == 0
+    assert "| scene seed 1 (adhesion, ζ_n/ζ_t 0.5, 2 frames) | all | 7.7–7.7 | 2 |" in out.read_text()

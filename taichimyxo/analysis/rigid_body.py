@@ -306,11 +306,12 @@ def edge_speed_table(R_over_L=(0.6, 0.8, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 10.0), dr
 
 
 # ---------------------------------------------------------------------------------------------------- guiding pulls
-def guiding_pulls(positions, engine_direction, box=None, W=W_CELL, d_g=0.25, f_max_pN=F_MAX, self_follow=True):
-    """Each cell's guiding pull on its head particle (n_cells, 2) pN as terms/guiding.py computes it with
-    distance = "segments": for every leader whose tail segment lies within gap 0 < g < d_g of the follower's head
-    segment, min(k_g g, F_max) along the closest points' separation, toward the leader (k_g = F_max / d_g), summed.
-    Also returns the gap to the nearest leader (inf: none in range). All pairs (O(n^2): n up to a few thousand)."""
+def guiding_pairs(positions, engine_direction, box=None, W=W_CELL, d_g=0.25, f_max_pN=F_MAX, self_follow=True):
+    """Every guiding pair as terms/guiding.py finds it with distance = "segments": for every leader j whose tail
+    segment lies within gap 0 < g < d_g of follower i's head segment, the pull min(k_g g, F_max) on i's head particle
+    along the closest points' separation, toward the leader (k_g = F_max / d_g); adhesion puts minus it on j's tail
+    particle. Returns (follower (k,), leader (k,), pull (k, 2) pN, gap (k,) µm). All pairs (O(n^2): n up to a few
+    thousand)."""
     x = np.asarray(positions, float)
     n, N = x.shape[:2]
     hi, ti_ = _head_index(engine_direction, N), _tail_index(engine_direction, N)
@@ -326,15 +327,25 @@ def guiding_pulls(positions, engine_direction, box=None, W=W_CELL, d_g=0.25, f_m
     B1 = np.broadcast_to(Hb[:, None], (n, n, 2))
     s, t, c1, c2, d = closest_points(A1, B1, Ta[None, :] + shift, Tb[None, :] + shift)
     g = d - W
-    k_g = f_max_pN / d_g
     ok = (g > 0) & (g < d_g)
     if not self_follow:
         ok &= ~np.eye(n, dtype=bool)
-    mag = np.where(ok, np.minimum(k_g * g, f_max_pN), 0.0)
-    sep = c2 - c1
+    fi, lj = np.nonzero(ok)
+    sep = (c2 - c1)[fi, lj]
     unit = sep / np.maximum(np.linalg.norm(sep, axis=-1, keepdims=True), 1e-12)
-    pull = (mag[..., None] * unit).sum(1)
-    gap = np.where(ok, g, np.inf).min(1)
+    mag = np.minimum((f_max_pN / d_g) * g[fi, lj], f_max_pN)
+    return fi, lj, mag[:, None] * unit, g[fi, lj]
+
+
+def guiding_pulls(positions, engine_direction, box=None, W=W_CELL, d_g=0.25, f_max_pN=F_MAX, self_follow=True):
+    """Each cell's guiding pull on its head particle (n_cells, 2) pN, the sum of its guiding_pairs, and the gap to
+    its nearest leader (inf: none in range)."""
+    n = len(positions)
+    fi, lj, pull_k, gap_k = guiding_pairs(positions, engine_direction, box, W, d_g, f_max_pN, self_follow)
+    pull = np.zeros((n, 2))
+    np.add.at(pull, fi, pull_k)
+    gap = np.full(n, np.inf)
+    np.minimum.at(gap, fi, gap_k)
     return pull, gap
 
 
