@@ -46,11 +46,18 @@ def main(argv=None) -> int:
     ap.add_argument("--start-fraction", type=float, default=0.75, help="frames from this fraction of the run on")
     ap.add_argument("--every", type=int, default=1)
     ap.add_argument("--min-radius", type=float, default=3.0, help="also summarise aggregates of at least this R, µm")
+    ap.add_argument("--radius-bins", default="0,3,4,5,7", help="edges of the radius bins of the second table, µm")
     a = ap.parse_args(argv)
     for p in a.trajectories:
         if not p.is_file():
             print(f"aggregate_balance: no trajectory {p}", file=sys.stderr)
             return 2
+    try:
+        edges = [float(x) for x in a.radius_bins.split(",")] + [float("inf")]
+    except ValueError:
+        print(f"aggregate_balance: --radius-bins {a.radius_bins!r} is not a comma-separated list of µm",
+              file=sys.stderr)
+        return 2
     lines = ["# The torque balance of rotating aggregates", "",
              f"`python benchmarks/aggregate_balance.py {' '.join(p.name for p in a.trajectories)} --out "
              f"{a.out.name}` (frames from {a.start_fraction:g} of each run on, every {a.every}). Each factor: median "
@@ -61,6 +68,10 @@ def main(argv=None) -> int:
              "| run | aggregates | R | n | edge µm/min | model edge | " + " | ".join(FACTORS[2:])
              + " | adhesion outside / drive | contacts outside / drive |",
              "|" + "---|" * (len(FACTORS) + 6)]
+    by_radius = ["", "By radius (aggregate-frames of each bin; ρ: Spearman rank correlation of the edge speed with "
+                 "the alignment across them):", "",
+                 "| run | R µm | n | edge µm/min | model edge | alignment_torque | against | bend_deg | outside | ρ |",
+                 "|---|---|---|---|---|---|---|---|---|---|"]
     for p in a.trajectories:
         scene, P, n, rows = run_rows(p, a.start_fraction, a.every)
         label = (f"{scene.raw['scene']['name']} seed {scene.raw['run']['seed']} ({P['kind']}, ζ_n/ζ_t "
@@ -74,6 +85,15 @@ def main(argv=None) -> int:
             lines.append(f"| {label} | {title} | {Rs[0]:.1f}–{Rs[-1]:.1f} | {s['n']} | "
                          + " | ".join(fmt(s[k]) for k in FACTORS)
                          + f" | {s['adhesion_outside_over_drive']:+.3f} | {s['contacts_outside_over_drive']:+.3f} |")
+        for lo, hi in zip(edges[:-1], edges[1:]):
+            s = ab.summarise(rows, lo, hi)
+            if s["n"]:
+                by_radius.append(f"| {label} | {lo:g}–{hi:g} | {s['n']} | "
+                                 + " | ".join(f"{s[k][0]:.2f}" for k in ("edge_speed", "model_edge_speed",
+                                                                          "alignment_torque", "against"))
+                                 + f" | {s['bend_deg'][0]:.0f} | {s['outside'][0]:.2f} | "
+                                 f"{s['rho_edge_alignment']:+.2f} |")
+    lines += by_radius
     a.out.parent.mkdir(parents=True, exist_ok=True)
     a.out.write_text("\n".join(lines) + "\n")
     print("\n".join(lines))

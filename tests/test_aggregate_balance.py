@@ -147,3 +147,15 @@ def test_active_following_of_an_outside_leader_drives_the_member_by_its_pull():
     assert b["drive"] - b0["drive"] == pytest.approx(by_hand, rel=1e-9)     # adhesion: the same pull is outside
     assert b0["adhesion_outside"] == pytest.approx(by_hand, rel=1e-9)
     assert b["pulls"] == pytest.approx(b["drive"] / b0["drive"] / 3.0, rel=1e-9)   # the disk's 1 + F_max / F_e = 3
+
+
+def test_the_summary_keeps_a_radius_window_and_ranks_the_edge_speed_against_the_alignment():
+    base = dict(model_edge_speed=1.0, arrangement=0.5, profile=1.0, alignment_drag=1.0, pulls=1.0, bend_deg=0.0,
+                outside=1.0, rotation=1.0, edge_profile=1.0, against=0.0, drive=1.0, adhesion_outside=0.0,
+                contacts_outside=0.0)
+    rows = [dict(base, radius_um=3.0 + k, edge_speed=1.0 + k, alignment_torque=0.1 * (k + 1)) for k in range(5)]
+    assert ab.summarise(rows)["rho_edge_alignment"] == pytest.approx(1.0)
+    s = ab.summarise(rows, 4.0, 6.0)
+    assert s["n"] == 2 and s["edge_speed"][0] == pytest.approx(2.5)
+    rows[0]["alignment_torque"] = 9.0            # the slowest now best aligned: the ranks no longer agree
+    assert ab.summarise(rows)["rho_edge_alignment"] == pytest.approx(0.0)

@@ -152,10 +152,12 @@ def frame_balances(frame, aggregates, params: dict) -> list[dict]:
             for a in aggregates]
 
 
-def summarise(rows: list[dict], min_radius_um: float = 0.0) -> dict:
-    """Medians (and quartiles) of each factor over the aggregates of at least min_radius_um, and the torques as
-    fractions of the drive (summed over aggregates, signed so that a drag on the rotation is negative)."""
-    rows = [r for r in rows if r["radius_um"] >= min_radius_um]
+def summarise(rows: list[dict], min_radius_um: float = 0.0, max_radius_um: float = float("inf")) -> dict:
+    """Medians (and quartiles) of each factor over the aggregates with min_radius_um <= R < max_radius_um, the
+    torques as fractions of the drive (summed over aggregates, signed so that a drag on the rotation is negative),
+    and the Spearman rank correlation of the measured edge speed with the alignment (torque) across aggregates."""
+    from scipy.stats import spearmanr
+    rows = [r for r in rows if min_radius_um <= r["radius_um"] < max_radius_um]
     out = dict(n=len(rows))
     if not rows:
         return out
@@ -168,4 +170,8 @@ def summarise(rows: list[dict], min_radius_um: float = 0.0) -> dict:
     drive = float((sense * [r["drive"] for r in rows]).sum())
     for k in ("adhesion_outside", "contacts_outside"):
         out[k + "_over_drive"] = float((sense * [r[k] for r in rows]).sum()) / drive if drive else float("nan")
+    e, al = np.array([r["edge_speed"] for r in rows]), np.array([r["alignment_torque"] for r in rows])
+    ok = np.isfinite(e) & np.isfinite(al)
+    out["rho_edge_alignment"] = (float(spearmanr(e[ok], al[ok]).statistic) if ok.sum() >= 3 and np.ptp(e[ok]) > 0
+                                 and np.ptp(al[ok]) > 0 else float("nan"))
     return out
