@@ -18,8 +18,7 @@ from taichimyxo.io.scene import Scene
 from taichimyxo.io.schema import SCHEMA
 from taichimyxo.io.trajectory import count_frames, read_frames, read_scene
 
-FACTORS = ("edge_speed", "model_edge_speed", "arrangement", "profile", "alignment_torque", "alignment_drag",
-           "pulls", "outside", "rotation", "edge_profile", "against", "bend_deg")
+FACTORS = ab.FACTORS
 
 
 def run_rows(path: Path, start_fraction: float, every: int):

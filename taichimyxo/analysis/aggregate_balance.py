@@ -46,8 +46,9 @@ from ..physics.geometry import min_image
 from . import rigid_body as rb
 from .cells import CellGeometry
 
-FIELDS = ("n_cells", "radius_um", "edge_speed", "model_edge_speed", "arrangement", "outside", "rotation",
-          "edge_profile", "drive", "adhesion_outside", "contacts_outside", "drag_torque")
+# what summarise() takes the median of, in the order the tables show them
+FACTORS = ("edge_speed", "model_edge_speed", "arrangement", "profile", "alignment_torque", "alignment_drag", "pulls",
+           "outside", "rotation", "edge_profile", "against", "bend_deg")
 
 
 def balance_params(scene) -> dict:
@@ -85,14 +86,12 @@ def balance(geo: CellGeometry, members, centre, edge_speed: float, radius_um: fl
     ke = geo.ke[mem]
     N = geo.N
     u = rb.cell_axes(x, ke)
-    nrm = np.stack([-u[..., 1], u[..., 0]], -1)
-    zt, zn = rb.drag_coefficients(v_b, engine_force_pN, N, drag_ratio_normal)
-    pu, pn = rb._cross(x, u), rb._cross(x, nrm)
-    D = float((zt * pu ** 2 + zn * pn ** 2).sum())
-    engine = float((engine_force_pN / N) * pu.sum())
+    zt, _ = rb.drag_coefficients(v_b, engine_force_pN, N, drag_ratio_normal)
+    alone = rb.rigid_motion(x, ke, v_b, drag_ratio_normal, engine_force_pN, centre=(0.0, 0.0))
+    engine, D = alone["drive_torque"], alone["rotational_drag"]       # the engines' torque, the rotational drag
     drive = engine
     v = geo.vel[mem]
-    drag = float(rb._cross(x, zt * (v * u).sum(-1)[..., None] * u + zn * (v * nrm).sum(-1)[..., None] * nrm).sum())
+    drag = rb.drag_torque(x, ke, v, v_b, drag_ratio_normal, engine_force_pN, centre=(0.0, 0.0))
     # guiding: each pair's force on a member's head (and adhesion's reaction on a member's tail)
     where = np.full(geo.n, -1)
     where[mem] = np.arange(len(mem))
@@ -161,8 +160,7 @@ def summarise(rows: list[dict], min_radius_um: float = 0.0, max_radius_um: float
     out = dict(n=len(rows))
     if not rows:
         return out
-    for k in ("edge_speed", "model_edge_speed", "arrangement", "profile", "alignment_torque", "alignment_drag",
-              "pulls", "outside", "rotation", "edge_profile", "against", "bend_deg"):
+    for k in FACTORS:
         a = np.array([r[k] for r in rows], float)
         a = a[np.isfinite(a)]
         out[k] = [float(q) for q in np.percentile(a, [50, 25, 75])] if len(a) else [float("nan")] * 3
