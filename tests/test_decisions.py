@@ -66,6 +66,32 @@ def test_the_two_suppression_rules_are_read_together_as_the_drag_and_self_follow
     assert sum(r is not None for r in rows.values()) == 4                    # the repeats of those rows dropped
 
 
+def test_dense_runs_carry_their_stream_measures_and_sparse_runs_none(tmp_path):
+    """A run from the aligned packing (S12, S14) is judged by its streams: nematic order (straight), local polar
+    order (sorted) over the last quarter and the fraction of cell-frames faster than 1.1 v_b; S4 gets none."""
+    def analysis(nem, polar, fast):
+        t = [0.0, 20.0, 40.0, 60.0]
+        counts = [0.0] * 16
+        counts[7], counts[10] = 1 - fast, fast                       # 3.5-4 and 5-5.5 µm/min (v_b = 4)
+        return {"meta": {"n_cells": 100}, "tracks": [],
+                "timeseries": {"time_min": t, "fraction_in_aggregates": [0.0] * 4, "nematic_order": [1.0] + nem,
+                               "local_polar_order": [0.0] + polar, "speed_p95_um_per_min": [4.0] * 4},
+                "speed_histograms": {"bin_edges_um_per_min": [0.5 * i for i in range(17)],
+                                     "inside_aggregates": [0.0] * 16, "outside_aggregates": counts}}
+    for s, nem in ((1, 0.9), (2, 0.7)):
+        _run(tmp_path, f"s12_{s}", "S12", {}, s, None, 0.0)
+        d = tmp_path / "runs" / f"s12_{s}"
+        (d / "a.analysis.json").write_text(json.dumps(analysis([0.5, 0.5, nem], [0.1, 0.3, 0.6], 0.25)))
+    _run(tmp_path, "s4", "S4", {}, 1, 0.8, 0.5)
+    runs = {r["run"]: r["measures"] for r in read_runs([tmp_path])}
+    m = runs["s12_1"]
+    assert m["nematic_order"] == pytest.approx(0.9) and m["local_polar_order"] == pytest.approx(0.6)  # t = 60 only
+    assert m["fast_fraction"] == pytest.approx(0.25)
+    assert "nematic_order" not in runs["s4"]
+    cell = {r["reading"]: r for r in readings(read_runs([tmp_path]))}["default"]["cells"]["S12 straight"]
+    assert (cell["mean"], cell["n"]) == (pytest.approx(0.8), 2)
+
+
 def test_rigid_fraction_counts_cells_of_rigidly_rotating_aggregates_over_the_last_quarter():
     tracks = [{"series": {"time_min": [3.0, 4.0], "n_cells": [10, 20], "rigidity_exponent": [0.9, 1.0]}},
               {"series": {"time_min": [4.0], "n_cells": [30], "rigidity_exponent": [0.1]}},       # cells at v_b

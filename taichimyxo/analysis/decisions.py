@@ -64,9 +64,17 @@ CLAIMS = [
     ("S3FigA aggregates", "S3FigA", "n_aggregates", "very flexible: many small stable aggregates"),
     ("S3FigC size", "S3FigC", "aggregate_cells", "rigid: aggregates larger than flexible cells' (S3C Fig)"),
     ("S15 in aggregates", "S15", "fraction_in_aggregates", "reversing cells aggregate only with suppression"),
-    ("S14 in aggregates", "S14", "fraction_in_aggregates", "dense very rigid, active following (S14 Video)"),
-    ("S12 in aggregates", "S12", "fraction_in_aggregates", "dense very rigid, no guiding: straight streams"),
+    ("S14 in aggregates", "S14", "fraction_in_aggregates", "dense very rigid, active following (S14 Video): "
+     "streams, no circular aggregates named"),
+    ("S14 straight", "S14", "nematic_order", "rigid and very rigid cells with active following sort into adjacent "
+     "straight streams (S14 Video)"),
+    ("S14 faster", "S14", "fast_fraction", "with active following whole streams move faster than v_b"),
+    ("S12 straight", "S12", "nematic_order", "very rigid non-guided cells sort themselves into straight streams "
+     "(S12 Video)"),
+    ("S12 sorted", "S12", "local_polar_order", "the streams sorted: touching cells heading one way (the start's "
+     "polarities are random)"),
 ]
+DENSE_MEASURES = ("nematic_order", "local_polar_order", "fast_fraction")   # dense.dense_measures, aligned starts
 
 
 def _scene_name(run_dir: Path, point: dict) -> str:
@@ -92,6 +100,16 @@ def rigid_fraction(analysis: dict) -> float | None:
             if t in count and a is not None and a >= RIGID_EXPONENT:
                 count[t] += k
     return float(np.mean([count[t] / n for t in late]))
+
+
+def dense_of(scene: dict, analysis: dict) -> dict:
+    """A run from the aligned packing (a dense scene): its stream measures (DENSE_MEASURES, by
+    dense.dense_measures over the last quarter); other runs: none."""
+    if (scene.get("population") or {}).get("start") != "aligned" or not analysis.get("timeseries"):
+        return {}
+    from .dense import dense_measures
+    m = dense_measures(analysis, float(scene["cell"]["speed_um_per_min"]))
+    return {k: (m[k] if m[k] is not None and math.isfinite(m[k]) else None) for k in DENSE_MEASURES}
 
 
 def self_curled(trajectory: Path, width: float, reach: float) -> float | None:
@@ -126,7 +144,9 @@ def read_run(run_dir: Path) -> dict | None:
                                        "aggregate_cells", "free_cell_speed_vb")}
     an = run_dir / str(result.get("analysis") or "")
     if an.is_file():
-        measures["rigid_fraction"] = rigid_fraction(json.loads(an.read_text()))
+        analysis = json.loads(an.read_text())
+        measures["rigid_fraction"] = rigid_fraction(analysis)
+        measures.update(dense_of(scene, analysis))
     gsd = next(iter(sorted(run_dir.glob("*.gsd"))), None)
     if gsd is not None:
         W = scene["cell"]["width_um"]
@@ -167,7 +187,8 @@ def read_record_run(run_dir: Path, records: Path) -> dict | None:
     oc = outcomes(analysis)
     measures = {m: oc.get(m) for m in ("edge_speed_vb", "fraction_in_aggregates", "n_aggregates",
                                        "aggregate_cells")}
-    measures.update(rigid_fraction=rigid_fraction(analysis), self_curled=None, free_cell_speed_vb=None)
+    measures.update(rigid_fraction=rigid_fraction(analysis), self_curled=None, free_cell_speed_vb=None,
+                    **dense_of(scene_values, analysis))
     return {"scene": _scene_name(run_dir, point), "seed": (rec.summary or {}).get("seed"), "values": values,
             "measures": measures, "run": run_dir.name, "record": f"{path.parent.name}/{path.name}"}
 

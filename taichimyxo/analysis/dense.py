@@ -13,6 +13,8 @@ dense run, from its analysis summary, over the last quarter of its analysed fram
   long_lived_fraction     fraction of its aggregate-frames in tracks living >= 10 min (whole run)
   nematic_order           global nematic order of the cells' axes, mean ± SD: straight streams across the periodic
                           box, whichever way each runs, share one axis; a crowd without pattern does not
+  local_polar_order       mean cosine between the headings of touching cells, mean ± SD: sorted streams
+                          (neighbours heading one way) against the aligned start's random polarities (~0)
   fast_fraction           fraction of cell-frames (whole run) faster than FAST_VB v_b, from the speed histogram
   speed_p95_vb            95th percentile of cell speed / v_b, mean ± SE over frames (batch means)
 Flexible is k_a <= 1e-17 N·m, very rigid 1e-15, rigid 1e-16 (the paper's labels; docs/model.md). Three rows:
@@ -53,12 +55,14 @@ def dense_measures(summary: dict, v_b: float) -> dict:
     t = np.asarray(ts["time_min"], float)
     fr, fr_sd = _mean_sd(_late(ts["fraction_in_aggregates"]))
     nem, nem_sd = _mean_sd(_late(ts["nematic_order"]))
+    lp, lp_sd = _mean_sd(_late(ts.get("local_polar_order", [float("nan")])))
     p95, p95_se, _ = series_mean_se(_late(ts["speed_p95_um_per_min"]) / v_b)
     h = summary.get("speed_histograms") or {}
     edges = np.asarray(h.get("bin_edges_um_per_min", []), float)
     counts = np.asarray(h.get("inside_aggregates", []), float) + np.asarray(h.get("outside_aggregates", []), float)
     fast = edges[:-1] >= FAST_VB * v_b if len(counts) else np.zeros(0, bool)
     return dict(fraction_in_aggregates=fr, fraction_sd=fr_sd, nematic_order=nem, nematic_sd=nem_sd,
+                local_polar_order=lp, local_polar_sd=lp_sd,
                 speed_p95_vb=p95, speed_p95_se=p95_se,
                 fast_fraction=float(counts[fast].sum() / counts.sum()) if counts.sum() else float("nan"),
                 fast_above_um_per_min=float(edges[:-1][fast][0]) if fast.any() else float("nan"),
