@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from .aggregate_measure import RIGID_EXPONENT
+from .dense import dense_measures
 
 # decision key -> how the table names it (docs/decisions.md says why each is open)
 DECISIONS = {
@@ -107,7 +108,6 @@ def dense_of(scene: dict, analysis: dict) -> dict:
     dense.dense_measures over the last quarter); other runs: none."""
     if (scene.get("population") or {}).get("start") != "aligned" or not analysis.get("timeseries"):
         return {}
-    from .dense import dense_measures
     m = dense_measures(analysis, float(scene["cell"]["speed_um_per_min"]))
     return {k: (m[k] if m[k] is not None and math.isfinite(m[k]) else None) for k in DENSE_MEASURES}
 
