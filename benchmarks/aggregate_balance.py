@@ -67,10 +67,10 @@ def main(argv=None) -> int:
              "| run | aggregates | R | n | edge µm/min | model edge | " + " | ".join(FACTORS[2:])
              + " | adhesion outside / drive | contacts outside / drive |",
              "|" + "---|" * (len(FACTORS) + 6)]
-    by_radius = ["", "By radius (aggregate-frames of each bin; ρ: Spearman rank correlation of the edge speed with "
-                 "the alignment across them):", "",
-                 "| run | R µm | n | edge µm/min | model edge | alignment_torque | against | bend_deg | outside | ρ |",
-                 "|---|---|---|---|---|---|---|---|---|---|"]
+    by_radius = ["", "By radius (medians over the aggregate-frames of each bin; ρ: Spearman rank correlation of "
+                 "the edge speed with the alignment across them):", "",
+                 "| run | R µm | n | edge µm/min | model edge | " + " | ".join(FACTORS[2:]) + " | ρ |",
+                 "|" + "---|" * (len(FACTORS) + 4)]
     for p in a.trajectories:
         scene, P, n, rows = run_rows(p, a.start_fraction, a.every)
         label = (f"{scene.raw['scene']['name']} seed {scene.raw['run']['seed']} ({P['kind']}, ζ_n/ζ_t "
@@ -88,10 +88,9 @@ def main(argv=None) -> int:
             s = ab.summarise(rows, lo, hi)
             if s["n"]:
                 by_radius.append(f"| {label} | {lo:g}–{hi:g} | {s['n']} | "
-                                 + " | ".join(f"{s[k][0]:.2f}" for k in ("edge_speed", "model_edge_speed",
-                                                                          "alignment_torque", "against"))
-                                 + f" | {s['bend_deg'][0]:.0f} | {s['outside'][0]:.2f} | "
-                                 f"{s['rho_edge_alignment']:+.2f} |")
+                                 + " | ".join(f"{s[k][0]:.0f}" if k == "bend_deg" else f"{s[k][0]:.2f}"
+                                              for k in FACTORS)
+                                 + f" | {s['rho_edge_alignment']:+.2f} |")
     lines += by_radius
     a.out.parent.mkdir(parents=True, exist_ok=True)
     a.out.write_text("\n".join(lines) + "\n")

@@ -188,3 +188,12 @@ def test_aggregate_balance_finds_a_rigid_disk_of_cells_along_circles_turning_rig
     out = tmp_path / "table.md"
     assert mod.main([str(path), "--out", str(out), "--start-fraction", "0"]) == 0
     assert "| scene seed 1 (adhesion, ζ_n/ζ_t 0.5, 2 frames) | all | 7.7–7.7 | 2 |" in out.read_text()
+
+
+def test_continue_state_refuses_a_length_that_is_not_positive(tmp_path, capsys):
+    """benchmarks/continue_state.py: --minutes 0 is one line naming the option and exit status 2, before any state
+    is loaded or folder made."""
+    mod = _benchmark("continue_state")
+    out = tmp_path / "run"
+    assert mod.main(["--minutes", "0", "--out", str(out)]) == 2
+    assert "--minutes" in capsys.readouterr().err and not out.exists()

@@ -196,3 +196,26 @@ def test_render_strain_without_logged_strain(tmp_path):
     p = cli("render", traj, "--color", "strain", "--out", out)
     assert_one_line_error(p, "log/bonds/strain_energy_J", "--set output.strain=true")
     assert not out.exists()
+
+
+def test_a_run_can_start_from_a_given_state(tmp_path):
+    """run_scene(start_state=...) (benchmarks/continue_state.py): the run's first frame is the state given, not the
+    scene's own start, and the run goes on from it like any other (here: 6 cells moved 1 µm across the box)."""
+    from taichimyxo.io.trajectory import read_frames
+    from taichimyxo.runtime import backend
+    from taichimyxo.runtime.scene_run import run_scene
+    from taichimyxo.runtime.simulation import initial_state
+    backend.init("cpu", int(os.environ["TAICHIMYXO_THREADS"]))
+    sc = build_small_scene(6, run={"hours": 0.0002, "dt_ms": 1.0, "seed": 3},
+                           output={"movie": False, "frame_interval_min": 0.006})
+    positions, heads = initial_state(sc)
+    moved = np.asarray(positions) + np.array([1.0, 0.0])
+    summary = run_scene(sc, out_dir=tmp_path, progress=False, start_state=(moved, -np.asarray(heads)))
+    assert summary["completed"]
+    frames = list(read_frames(str(tmp_path / f"{sc.name}.gsd")))
+    assert len(frames) == 3                                         # 720 steps, a frame every 360
+    box = np.asarray(frames[0].box)
+    gap = (frames[0].positions - moved + box / 2) % box - box / 2   # the frame may hold wrapped positions
+    np.testing.assert_allclose(gap, 0.0, atol=1e-4)
+    np.testing.assert_array_equal(frames[0].engine_direction, -np.asarray(heads))
+    assert np.abs(frames[-1].positions - frames[0].positions).max() > 0      # it moved on from there

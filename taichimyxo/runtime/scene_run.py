@@ -98,8 +98,10 @@ def _placement_progress(scene):
 def run_scene(scene: Scene, out_dir: str = "videos", arch: str = "cpu", resume: bool = False,
               progress: bool = True, threads: int | None = None, reuse: bool = True,
               checkpoint_every_s: float = 300.0, stop_after_steps: int | None = None, rollback: bool = True,
-              overwrite: bool = False) -> dict:
+              overwrite: bool = False, start_state=None) -> dict:
     """Run `scene`, writing NAME.mp4/.png/.gsd/.json into out_dir. Returns the summary dict.
+    start_state: (positions (n_cells, N, 2) µm, engine_direction (n_cells,)) to start from instead of the scene's
+    own start (e.g. a benchmark state continued as a run); a resumed run takes its checkpoint's state either way.
     An earlier run in out_dir (taichimyxo.io.outdir.plan_run): an unfinished one continues only with resume and is
     replaced only with overwrite; a finished one of the same scene is returned as it is, with "already_complete".
     stop_after_steps (tests): behave as if interrupted after that many steps.
@@ -119,19 +121,19 @@ def run_scene(scene: Scene, out_dir: str = "videos", arch: str = "cpu", resume: 
     try:
         return _run_locked(scene, out, start, resume=resume, progress=progress, arch=arch, threads=threads,
                            reuse=reuse, checkpoint_every_s=checkpoint_every_s, stop_after_steps=stop_after_steps,
-                           rollback=rollback)
+                           rollback=rollback, start_state=start_state)
     finally:
         Path(lock.name).unlink(missing_ok=True)        # the folder as the run left it, no lock behind
         lock.close()
 
 
 def _run_locked(scene: Scene, out: Path, start: str, *, resume, progress, arch, threads, reuse, checkpoint_every_s,
-                stop_after_steps, rollback) -> dict:
+                stop_after_steps, rollback, start_state=None) -> dict:
     files = outputs(out, scene.name)
     if start == "overwrite":
         remove_run(files)
 
-    if reuse and not resume:
+    if reuse and not resume and start_state is None:
         found = find_reusable_trajectory(scene, out)
         if found is not None and found[0] != files["gsd"]:
             return render_only(scene, found[0], out, progress=progress, every=found[1])
@@ -156,7 +158,8 @@ def _run_locked(scene: Scene, out: Path, start: str, *, resume, progress, arch, 
     # resumed run takes its state from the checkpoint instead of placing cells it would throw away
     from .simulation import Simulation, init_backend, initial_state
     if ckpt is None:
-        start = initial_state(scene, progress=_placement_progress(scene) if progress else None)
+        start = start_state if start_state is not None else \
+            initial_state(scene, progress=_placement_progress(scene) if progress else None)
     used_arch = init_backend(scene, arch, threads)
     t_setup = time.perf_counter()
     if ckpt is None:
