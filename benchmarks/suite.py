@@ -51,6 +51,8 @@ BENCHMARKS = {
                          "benchmarks/results/rigid_body_check.md"),
     "aggregate_balance": ("physics", "why a run's aggregates turn at their edge speed: the torque balance, factor "
                           "by factor from the rigid-body model's disk", "benchmarks/results/aggregate_balance.md"),
+    "continue_state": ("physics", "a benchmark state continued as a run with velocities (the 6 h S3's aggregates' "
+                       "torque balance)", "benchmarks/results/aggregate_balance_S3_paper_6h.md"),
     "tracks_validation": ("physics", "the mechanism report on degraded tracks of simulated runs",
                           "benchmarks/results/tracks_validation.md"),
     "lab_example": ("physics", "the mechanism report on a public data set of M. xanthus tracks (downloaded)",
