@@ -2,6 +2,7 @@
 
     python benchmarks/states.py [--runs DIR]      # (re)makes benchmarks/states/S3-1h.npz
     python benchmarks/states.py --late           # (re)makes benchmarks/states/S3-6h.npz from the figures' record
+    python benchmarks/states.py --measure --states "S3 6 h" --threads 2 [--profile]   # ms per step (+ per kernel)
 
 - "S3 6 h": the paper-scale S3 (200 x 200 µm, 2000 cells, active following) as its 6 h run ends, the state the late
   hours of a run are spent in (about 145 rotating aggregates of ~10 cells; docs/figures.md, "S3 at the paper's
@@ -140,10 +141,11 @@ ROWS = (("S3 6 h", None, None, True), ("S3 start", "S3", 1.0, False), ("S3 1 h",
         ("S13 dense", None, None, True))
 
 
-def measure(steps: int, warm: int, names=None) -> list[dict]:
+def measure(steps: int, warm: int, names=None, profile: bool = False) -> list[dict]:
     """taichimyxo.interface.bench.measure of S3's start and of each benchmark state, in its STATE_RUN or else the
     scene's own step and precision (Taichi initialised by the caller), with the wall time of a full 6 h paper-scale S3
-    at each one's cost per particle-step (S3's 16 000 particles, 6 h of its steps)."""
+    at each one's cost per particle-step (S3's 16 000 particles, 6 h of its steps). profile: Taichi's kernel profiler
+    table (each offloaded loop's count, min, mean and max time, warm-up steps included) printed after each state."""
     from taichimyxo.interface.bench import measure as package_measure
     from taichimyxo.io.scene import Scene
     from taichimyxo.runtime import backend
@@ -161,6 +163,10 @@ def measure(steps: int, warm: int, names=None) -> list[dict]:
         r = package_measure(scene, area, steps, w, run=STATE_RUN.get(label), start=start, state=label)
         r["full_S3_6h_wall_h"] = round(s3_particle_steps / r["particle_steps_per_s"] / 3600.0, 2)
         rows.append(r)
+        if profile:
+            import taichi as ti
+            print(f"kernel profile of {label}:", flush=True)
+            ti.profiler.print_kernel_profiler_info("count")
     return rows
 
 
@@ -178,6 +184,8 @@ def main() -> None:
     p.add_argument("--threads", type=int, default=None, help="with --measure: CPU threads")
     p.add_argument("--steps", type=int, default=1000, help="with --measure: steps timed per state")
     p.add_argument("--states", default="", help="with --measure: comma-separated labels (default all)")
+    p.add_argument("--profile", action="store_true",
+                   help="with --measure: print Taichi's kernel profile of each state (its own cost included)")
     a = p.parse_args()
     if a.late:
         make_late()
@@ -186,9 +194,11 @@ def main() -> None:
         make(Path(a.runs))
         return
     from taichimyxo.runtime import backend
+    if a.profile:
+        os.environ["TI_KERNEL_PROFILER"] = "1"        # read by every ti.init, so it outlives measure's restarts
     backend.init("cpu", a.threads)
     names = [n for n in a.states.split(",") if n]
-    for r in measure(a.steps, warm=100, names=names):
+    for r in measure(a.steps, warm=100, names=names, profile=a.profile):
         r["threads"] = a.threads or os.cpu_count()
         print(json.dumps(r), flush=True)
 
