@@ -197,3 +197,32 @@ def test_continue_state_refuses_a_length_that_is_not_positive(tmp_path, capsys):
     out = tmp_path / "run"
     assert mod.main(["--minutes", "0", "--out", str(out)]) == 2
     assert "--minutes" in capsys.readouterr().err and not out.exists()
+
+
+def test_threads_times_one_thread_processes_at_once_and_refuses_a_count_below_one(tmp_path, monkeypatch, capsys):
+    """benchmarks/threads.py: --concurrent starts as many one-thread workers at once as the largest count and labels
+    each row with the processes it shared the machine with; --threads 0 is one line naming the option."""
+    mod = _benchmark("threads")
+    started = []
+
+    class Worker:                       # a worker process as rows_at reads it: JSON rows on stdout
+        def __init__(self, cmd, **kw):
+            started.append(cmd)
+
+        def communicate(self, timeout=None):
+            row = {"state": "S3 6 h", "threads": int(started[-1][started[-1].index("--threads") + 1]),
+                   "ms_per_step": 5.0, "particles": 16000}
+            return json.dumps(row) + "\n", ""
+
+    monkeypatch.setattr(mod.subprocess, "Popen", Worker)
+    monkeypatch.setattr(sys, "argv", ["threads.py", "--threads", "1,2", "--repeats", "1", "--states", "S3 6 h",
+                                      "--concurrent", "--out", str(tmp_path)])
+    mod.main()
+    assert len(started) == 4 and all("S3 6 h" in c for c in started)      # 1 thread, 2 threads, 2 x 1 thread
+    table = (tmp_path / "threads.csv").read_text().splitlines()
+    assert table[0].split(",")[:3] == ["state", "threads", "processes"]
+    assert [line.split(",")[1:3] for line in table[1:]] == [["1", "1"], ["2", "1"], ["1", "2"]]
+    monkeypatch.setattr(sys, "argv", ["threads.py", "--threads", "0", "--out", str(tmp_path / "no")])
+    with pytest.raises(SystemExit) as e:
+        mod.main()
+    assert "--threads" in str(e.value) and not (tmp_path / "no").exists()
