@@ -1,7 +1,7 @@
 """The dense step's cost, split into its parts by counted instructions (callgrind), and the forces check that goes
 with every change to it (benchmarks/results/dense_step.md).
 
-    python benchmarks/dense_step.py profile --state "S13 dense" [--skin 0.1] [--dt-ms 4] [--reps 2]
+    python benchmarks/dense_step.py profile --state "S13 dense" [--skin 0.1] [--dt-ms 4] [--reps 2] [--branch-sim]
     python benchmarks/dense_step.py rebuilds --state "S13 dense" [--skin 0.1] [--dt-ms 4] [--steps 1000]
     python benchmarks/dense_step.py forces --save OUT.npz [--threads 1]   # then: compare A.npz B.npz
 
@@ -11,12 +11,15 @@ step kernel as a run calls it, the pair loop alone (a kernel with only `Model.pa
 empty kernel's launch; per call, the median of --reps. Taichi's compiled loops have no symbols: each offloaded loop is
 one address, so `step_tasks_Ir` lists the step kernel's loops in compile order (the pair loop, then the per-cell
 loop; the pair loop is the one `pairs_tasks_Ir` shares). Run it once with `--native` first, so the kernels come from
-Taichi's offline cache: a compile under valgrind takes many minutes.
+Taichi's offline cache: a compile under valgrind takes many minutes; with `--native --reps 50` it also gives each
+part's best wall time on one thread (`*_best_ms`), the denominator of instructions per second. --branch-sim adds
+callgrind's branch simulation: conditional branches executed (Bc) and mispredicted by its model predictor (Bcm), per
+part and loop (the model's mispredictions, not the CPU's: an estimate of how branchy a loop is).
 rebuilds counts neighbour-list builds over --steps steps from the state (a count, the same under any load).
 forces saves Simulation.forces() and both neighbour lists at the check states (S13's start, a jam S13 reaches after
 300 steps, S11's lattice at exactly W, a quarter-area S3 after 2000 steps or, with DENSE_STEP_S3_1H=1, the S3 state
 after one hour); compare prints, per array, whether two saves are bit for bit equal and their largest difference.
-States: "S3 1 h" and "S13 dense" (benchmarks/states.py) or a check state ("S13 jam", ...).
+States: "S3 6 h", "S3 1 h" and "S13 dense" (benchmarks/states.py) or a check state ("S13 jam", ...).
 """
 from __future__ import annotations
 
@@ -27,6 +30,7 @@ import os
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -60,7 +64,7 @@ def make_sim(state: str, skin: float | None, dt_ms: float | None):
     from taichimyxo.runtime.simulation import Simulation
     if state in CHECK_STATES:
         scene, area, *start = check_state(state)
-    elif state in ("S3 1 h", "S13 dense"):
+    elif state in ("S3 6 h", "S3 1 h", "S13 dense"):
         import states
         scene, area, start = states.load(state)
     else:
@@ -111,26 +115,32 @@ def profile(a) -> dict:
         ti.sync()
 
     parts = {"step": lambda: sim.integrator.step(dt), "pairs": pairs_only, "rebuild": nl.rebuild, "empty": empty}
+    walls = {name: [] for name in parts}
     cg.cg_start()
     for rep in range(a.reps):
         for name, fn in parts.items():
             at_state()
             cg.cg_zero()
+            t0 = time.perf_counter()
             fn()
             ti.sync()
+            walls[name].append(time.perf_counter() - t0)
             cg.cg_dump(f"{name}:{rep}".encode())
     at_state()
     n = nl.nbr_n.to_numpy()
     info = {"state": a.state, "particles": sim.n_p, "skin_um": sim.scene.skin, "dt_ms": dt * 1e3,
             "listed_pairs": int(n.sum()) // 2, "partners_per_segment": round(float(n.mean()), 2)}
+    if a.native:                          # wall times mean something only outside valgrind: best of --reps, ms
+        info.update({f"{name}_best_ms": round(1e3 * min(w), 4) for name, w in walls.items()})
     sim.close()
     return info
 
 
 def _dumps(prefix: str) -> dict:
-    """label -> (instructions, {JIT task address: instructions}) of each callgrind dump written under prefix. The
-    instructions are the sum over functions: the dump's own total also counts Taichi's idle worker thread spinning,
-    which no function is charged with. Taichi's JIT-compiled tasks have no symbols; each is one address."""
+    """label -> ({event: count}, {JIT task address: {event: count}}) of each callgrind dump written under prefix
+    (events: Ir, and Bc, Bcm with --branch-sim). The counts are sums over functions: the dump's own total also counts
+    Taichi's idle worker thread spinning, which no function is charged with. Taichi's JIT-compiled tasks have no
+    symbols; each is one address."""
     out = {}
     for f in Path(prefix).parent.glob(Path(prefix).name + ".*"):
         label = next((x.split("Client Request: ", 1)[1].strip() for x in f.read_text(errors="replace").splitlines()
@@ -138,27 +148,38 @@ def _dumps(prefix: str) -> dict:
         if label is None:
             continue
         ann = subprocess.run(["callgrind_annotate", "--threshold=100", str(f)], capture_output=True, text=True).stdout
-        total, jit, body = 0, {}, False
+        events, total, jit, body = ["Ir"], {}, {}, False
         for line in ann.splitlines():
+            if line.startswith("Events shown:"):
+                events = line.split(":", 1)[1].split()
             if "file:function" in line:
                 body = True
                 continue
-            parts = line.split()
-            if body and parts and parts[0].replace(",", "").isdigit():
-                ir = int(parts[0].replace(",", ""))
-                total += ir
-                if "???:0x" in line and line.rstrip().endswith("[???]"):
-                    jit[line.split("???:")[1].split()[0]] = ir
+            parts = [x for x in line.split() if not x.startswith("(")]     # counts, without their percentages
+            if not (body and parts and parts[0].replace(",", "").isdigit()):
+                continue
+            counts = {}
+            for ev, x in zip(events, parts):
+                if not x.replace(",", "").isdigit():
+                    break
+                counts[ev] = int(x.replace(",", ""))
+            for ev, n in counts.items():
+                total[ev] = total.get(ev, 0) + n
+            if "???:0x" in line and line.rstrip().endswith("[???]"):
+                jit[line.split("???:")[1].split()[0]] = counts
         out[label] = (total, jit)
     return out
 
 
 def run_profile(a) -> dict:
-    """profile under callgrind; per part the median of its repetitions' instruction counts."""
+    """profile under callgrind; per part the median of its repetitions' counts (instructions; branches with
+    --branch-sim)."""
     with tempfile.TemporaryDirectory() as tmp:
         prefix = f"{tmp}/cg.out"
-        cmd = ["valgrind", "--tool=callgrind", "--instr-atstart=no", f"--callgrind-out-file={prefix}",
-               sys.executable, __file__, "profile", "--inside", "--state", a.state, "--reps", str(a.reps)]
+        cmd = ["valgrind", "--tool=callgrind", "--instr-atstart=no", f"--callgrind-out-file={prefix}"]
+        if a.branch_sim:
+            cmd.append("--branch-sim=yes")
+        cmd += [sys.executable, __file__, "profile", "--inside", "--state", a.state, "--reps", str(a.reps)]
         if a.skin is not None:
             cmd += ["--skin", str(a.skin)]
         if a.dt_ms is not None:
@@ -168,16 +189,16 @@ def run_profile(a) -> dict:
         if info is None:
             raise SystemExit(f"profile failed:\n{p.stdout[-2000:]}\n{p.stderr[-3000:]}")
         d = _dumps(prefix)
+    events = ("Ir", "Bc", "Bcm") if a.branch_sim else ("Ir",)
     per, tasks = {}, {}
     for label, (total, jit) in d.items():
         name = label.split(":")[0]
         per.setdefault(name, []).append(total)
         tasks[name] = [jit[k] for k in sorted(jit)]     # by address: the order Taichi compiled them in
-    res = {k: int(np.median(v)) for k, v in per.items()}
-    info.update({f"{k}_Ir": v for k, v in res.items()})
-    info["step_tasks_Ir"] = tasks["step"]            # the step kernel's offloaded loops
-    info["rebuild_tasks_Ir"] = tasks["rebuild"]
-    info["pairs_tasks_Ir"] = tasks["pairs"]
+    for ev in events:
+        info.update({f"{k}_{ev}": int(np.median([t.get(ev, 0) for t in v])) for k, v in per.items()})
+        for part in ("step", "rebuild", "pairs"):        # the step kernel's offloaded loops, and the others'
+            info[f"{part}_tasks_{ev}"] = [t.get(ev, 0) for t in tasks[part]]
     return info
 
 
@@ -268,6 +289,7 @@ def main() -> None:
     q.add_argument("--reps", type=int, default=2)
     q.add_argument("--inside", action="store_true", help=argparse.SUPPRESS)
     q.add_argument("--native", action="store_true", help="run the profile once without valgrind (fills the cache)")
+    q.add_argument("--branch-sim", action="store_true", help="count branches and the model's mispredictions too")
     sub.choices["rebuilds"].add_argument("--steps", type=int, default=1000)
     q = sub.add_parser("forces")
     q.add_argument("--save", required=True)
