@@ -32,6 +32,8 @@ BENCHMARKS = {
     "skin": ("speed", "cost per step and rebuilds against the neighbour-list skin", "benchmarks/results/skin.csv"),
     "dense_step": ("speed", "the dense step's parts by counted instructions, and its forces check",
                    "benchmarks/results/dense_step.md"),
+    "machine_speed": ("speed", "how steady the machine's cores are: a one-add loop in bursts, alone and together",
+                      "benchmarks/results/machine_speed.csv"),
     "measures": ("speed", "wall time of the experimental measures on a paper-scale trajectory",
                  "docs/measures.md, Cost"),
     "accuracy": ("accuracy", "each method against a converged reference, and its cost per simulated hour",

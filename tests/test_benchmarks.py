@@ -226,3 +226,20 @@ def test_threads_times_one_thread_processes_at_once_and_refuses_a_count_below_on
     with pytest.raises(SystemExit) as e:
         mod.main()
     assert "--threads" in str(e.value) and not (tmp_path / "no").exists()
+
+
+def test_machine_speed_times_each_core_alone_and_together_and_refuses_zero_bursts(tmp_path, capsys):
+    """benchmarks/machine_speed.py: one row per core per burst, alone and (on a machine of several cores) together,
+    each a positive rate; --bursts 0 is one line and exit status 2, before anything is compiled or written."""
+    import os
+    import shutil
+    mod = _benchmark("machine_speed")
+    assert mod.main(["--bursts", "0", "--out", str(tmp_path / "no")]) == 2
+    assert "--bursts" in capsys.readouterr().err and not (tmp_path / "no").exists()
+    if not (shutil.which("cc") or shutil.which("gcc") or shutil.which("clang")):
+        pytest.skip("no C compiler here")
+    assert mod.main(["--bursts", "2", "--iterations", "100000", "--out", str(tmp_path)]) == 0
+    rows = (tmp_path / "machine_speed.csv").read_text().splitlines()
+    cores = len(os.sched_getaffinity(0))
+    assert len(rows) - 1 == 2 * cores * (2 if cores > 1 else 1)
+    assert all(float(r.split(",")[-1]) > 0 for r in rows[1:])
