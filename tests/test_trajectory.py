@@ -56,7 +56,7 @@ def run_with_movie(tmp_path_factory):
     assert (sc.steps, sc.frame_every_steps, sc.trajectory_every_steps) == (7200, 600, 1200)
     out = tmp_path_factory.mktemp("run")
     summary = run_scene(sc, out_dir=out, progress=False)
-    assert summary["completed"]
+    assert summary["completed"] and summary["started_from"] == "placement"
     return sc, out, summary
 
 
@@ -200,7 +200,8 @@ def test_render_strain_without_logged_strain(tmp_path):
 
 def test_a_run_can_start_from_a_given_state(tmp_path):
     """run_scene(start_state=...) (benchmarks/continue_state.py): the run's first frame is the state given, not the
-    scene's own start, and the run goes on from it like any other (here: 6 cells moved 1 µm across the box)."""
+    scene's own start, the run goes on from it like any other (here: 6 cells moved 1 µm across the box), and its
+    summary records that it started from a given state (a scene's own start records "placement")."""
     from taichimyxo.io.trajectory import read_frames
     from taichimyxo.runtime import backend
     from taichimyxo.runtime.scene_run import run_scene
@@ -211,7 +212,7 @@ def test_a_run_can_start_from_a_given_state(tmp_path):
     positions, heads = initial_state(sc)
     moved = np.asarray(positions) + np.array([1.0, 0.0])
     summary = run_scene(sc, out_dir=tmp_path, progress=False, start_state=(moved, -np.asarray(heads)))
-    assert summary["completed"]
+    assert summary["completed"] and summary["started_from"] == "given state"       # the summary says so
     frames = list(read_frames(str(tmp_path / f"{sc.name}.gsd")))
     assert len(frames) == 3                                         # 720 steps, a frame every 360
     box = np.asarray(frames[0].box)

@@ -343,19 +343,23 @@ class Summary(Writer):
     checkpoint: the checkpoint's path, listed when the run did not complete; resumed: this session continued an
     interrupted one. The totals add the earlier sessions': `before` (previous_sessions), else those of the
     checkpoint the simulation was loaded from, else, when resumed, those of the summary it wrote. setup_seconds,
-    arch: how the simulation was built."""
+    arch: how the simulation was built. started_from: "placement" (the scene's own start) or "given state"
+    (run_scene's start_state), recorded as the summary's "started_from"."""
     order = 1
 
     def __init__(self, path, *, files: dict | None = None, checkpoint=None, resumed: bool = False,
-                 setup_seconds: float = 0.0, arch: str = "cpu", before: dict | None = None):
+                 setup_seconds: float = 0.0, arch: str = "cpu", before: dict | None = None,
+                 started_from: str = "placement"):
         self.path, self.files, self.checkpoint = Path(path), dict(files or {}), checkpoint
         self.resumed, self.setup_seconds, self.arch, self.before = resumed, setup_seconds, arch, before
+        self.started_from = started_from
         self.summary = None
 
     def finish(self, run) -> None:
         before = self.before if self.before is not None else (
             run.sim.sessions_before or (previous_sessions(self.path, run.sim.scene) if self.resumed else {}))
         self.summary = run_summary(run, self.files, self.checkpoint, before, self.setup_seconds, self.arch)
+        self.summary["started_from"] = self.started_from
         self.path.parent.mkdir(parents=True, exist_ok=True)
         tmp = self.path.with_name(self.path.name + ".tmp")
         try:

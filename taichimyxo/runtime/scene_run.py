@@ -170,7 +170,8 @@ def _run_locked(scene: Scene, out: Path, start: str, *, resume, progress, arch, 
 
     attached = scene_writers(scene, files, resumed=ckpt is not None, progress=progress,
                              checkpoint_every_s=checkpoint_every_s, setup_seconds=setup_s, arch=used_arch,
-                             before=previous_sessions(files["json"], scene, ckpt) if ckpt is not None else None)
+                             before=previous_sessions(files["json"], scene, ckpt) if ckpt is not None else None,
+                             started_from="placement" if start_state is None else "given state")
     movie = next((w for w in attached if isinstance(w, Movie)), None)
     if movie is not None and ckpt is not None and files["gsd"].is_file():
         from ..io.trajectory import read_frames
@@ -191,12 +192,13 @@ def _run_locked(scene: Scene, out: Path, start: str, *, resume, progress, arch, 
 
 def scene_writers(scene: Scene, files: dict, *, resumed: bool = False, progress: bool = True,
                   checkpoint_every_s: float = 300.0, setup_seconds: float = 0.0, arch: str = "cpu",
-                  before: dict | None = None) -> list:
+                  before: dict | None = None, started_from: str = "placement") -> list:
     """The writers a scene's run attaches (what a user would build): the invariant check at every frame, the
     progress line, the trajectory (every output.trajectory_interval_min) and the movie (every
     output.frame_interval_min), both also at the last step, the checkpoint (every checkpoint_every_s of wall
     clock, on interruption and on a broken invariant), the last-frame panel and the summary. before: a resumed run's
-    totals over its earlier sessions (writers.previous_sessions)."""
+    totals over its earlier sessions (writers.previous_sessions); started_from: what the summary says the run
+    started from ("placement" or "given state")."""
     write_movie = scene.movie
     look = scene_render_options(scene)
     attached = [InvariantCheck()]
@@ -214,7 +216,7 @@ def scene_writers(scene: Scene, files: dict, *, resumed: bool = False, progress:
         attached.append(FigurePanel(files["png"], **look))        # the panel `render` writes too
     listed = {k: v for k, v in files.items() if k != "ckpt" and (k in ("gsd", "json") or write_movie)}
     attached.append(Summary(files["json"], files=listed, checkpoint=files["ckpt"], resumed=resumed,
-                            setup_seconds=setup_seconds, arch=arch, before=before))
+                            setup_seconds=setup_seconds, arch=arch, before=before, started_from=started_from))
     return attached
 
 
