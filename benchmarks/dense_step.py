@@ -257,7 +257,7 @@ def forces(a) -> None:
         nl = sim.neighbours
         n = nl.nbr_n.to_numpy()
         out[f"{name}|contact list"] = np.concatenate([nl.nbr.to_numpy()[s, :n[s]] for s in range(len(n))] + [n])
-        if nl.guiding:
+        if nl.guide_n is not None:                 # the list exists only where a scene guides
             g = nl.guide_n.to_numpy()
             out[f"{name}|guiding list"] = np.concatenate([nl.guide.to_numpy()[r, :g[r]] for r in range(len(g))] + [g])
         sim.close()

@@ -102,9 +102,13 @@ class Contacts(Term):
         N = ti.static(self.N)
         ok = True
         if c == t // (N - 1):
-            kt = t % (N - 1)
-            ok = h - (2 * kt + 2) >= 3 or 2 * kt - h >= 3
+            ok = self.apart(h, t % (N - 1))
         return ok
+
+    @ti.func
+    def apart(self, h, k):
+        """Sample h of a cell is at least 1.5 segments along the cell from its segment k (sample_eligible's rule)."""
+        return h - (2 * k + 2) >= 3 or 2 * k - h >= 3
 
     @ti.func
     def point_seg(self, xp, A, B):
@@ -133,6 +137,13 @@ class Contacts(Term):
         n = ti.Vector([0.0, 0.0], dt=st.fdt)
         c = s // (N - 1)
         h = 2 * (s % (N - 1)) + j
+        kt = t % (N - 1)
+        # sample_eligible for t, t - 1 and t + 1 at once: the three are one cell's segments (t - 1 tested only when
+        # kt > 0, t + 1 only when kt < N - 2), so the cell is compared once
+        same = c == t // (N - 1)
+        ok_t = (not same) or self.apart(h, kt)
+        ok_prev = (not same) or self.apart(h, kt - 1)
+        ok_next = (not same) or self.apart(h, kt + 1)
         w = ti.cast(self.CONTACT_WEIGHT, st.fdt)          # a Taichi variable: a Python float would not branch
         if h == 0 or h == 2 * (N - 1):
             w = ti.cast(self.POLE_WEIGHT, st.fdt)
@@ -141,16 +152,15 @@ class Contacts(Term):
             xp = 0.5 * (P0 + P1)
         elif j == 2:
             xp = P1
-        if self.sample_eligible(c, h, t):
+        if ok_t:
             u, dist, cp = self.point_seg(xp, A, B)
             if dist < self.W:
                 ok = True
-                kt = t % (N - 1)
-                if kt > 0 and self.sample_eligible(c, h, t - 1):
+                if kt > 0 and ok_prev:
                     _, dprev, _ = self.point_seg(xp, Ap, A)
                     if dprev <= dist:
                         ok = False
-                if ok and kt < N - 2 and self.sample_eligible(c, h, t + 1):
+                if ok and kt < N - 2 and ok_next:
                     _, dnext, _ = self.point_seg(xp, B, Bn)
                     if dnext < dist:
                         ok = False
