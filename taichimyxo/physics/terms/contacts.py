@@ -95,19 +95,10 @@ class Contacts(Term):
         return ti.cast(self.state.mi(y - o), self.state.fdt)
 
     @ti.func
-    def sample_eligible(self, c, h, t):
-        """Sample h (half-segments along cell c) may touch segment t: another cell's segment, or one of its own cell's
-        segments at least 1.5 segments away along the cell (so a bend between neighbours is the bending spring's
-        business, while a folded cell, a hairpin, still pushes itself apart)."""
-        N = ti.static(self.N)
-        ok = True
-        if c == t // (N - 1):
-            ok = self.apart(h, t % (N - 1))
-        return ok
-
-    @ti.func
     def apart(self, h, k):
-        """Sample h of a cell is at least 1.5 segments along the cell from its segment k (sample_eligible's rule)."""
+        """Sample h (half-segments along its cell) may touch its own cell's segment k: at least 1.5 segments away
+        along the cell (so a bend between neighbours is the bending spring's business, while a folded cell, a
+        hairpin, still pushes itself apart). Another cell's segments are always eligible."""
         return h - (2 * k + 2) >= 3 or 2 * k - h >= 3
 
     @ti.func
@@ -138,8 +129,7 @@ class Contacts(Term):
         c = s // (N - 1)
         h = 2 * (s % (N - 1)) + j
         kt = t % (N - 1)
-        # sample_eligible for t, t - 1 and t + 1 at once: the three are one cell's segments (t - 1 tested only when
-        # kt > 0, t + 1 only when kt < N - 2), so the cell is compared once
+        # t, t - 1 and t + 1 are one cell's segments (t - 1 tested only when kt > 0, t + 1 when kt < N - 2)
         same = c == t // (N - 1)
         ok_t = (not same) or self.apart(h, kt)
         ok_prev = (not same) or self.apart(h, kt - 1)
