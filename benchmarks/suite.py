@@ -32,6 +32,8 @@ BENCHMARKS = {
     "skin": ("speed", "cost per step and rebuilds against the neighbour-list skin", "benchmarks/results/skin.csv"),
     "dense_step": ("speed", "the dense step's parts by counted instructions, and its forces check",
                    "benchmarks/results/dense_step.md"),
+    "pair_loop_c": ("speed", "the contact pair loop in plain C (OpenMP) against Taichi's, same state, alternating",
+                    "benchmarks/results/pair_loop_c.csv"),
     "machine_speed": ("speed", "how steady the machine's cores are: a one-add loop in bursts, alone and together",
                       "benchmarks/results/machine_speed.csv"),
     "measures": ("speed", "wall time of the experimental measures on a paper-scale trajectory",

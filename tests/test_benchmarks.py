@@ -243,3 +243,23 @@ def test_machine_speed_times_each_core_alone_and_together_and_refuses_zero_burst
     cores = len(os.sched_getaffinity(0))
     assert len(rows) - 1 == 2 * cores * (2 if cores > 1 else 1)
     assert all(float(r.split(",")[-1]) > 0 for r in rows[1:])
+
+
+def test_pair_loop_c_gives_taichis_contact_forces_to_rounding_and_refuses_bad_chunks(tmp_path, capsys):
+    """benchmarks/pair_loop_c.py: the C pair loop's pair_f equals Taichi's to rounding on a shipped state with real
+    contacts (S3 1 h); a chunk size that is not a power of two is one line, before anything is built or written."""
+    import shutil
+    import subprocess
+    mod = _benchmark("pair_loop_c")
+    with pytest.raises(SystemExit) as e:
+        mod.main(["--block-dims", "3", "--out", str(tmp_path / "no")])
+    assert "--block-dims" in str(e.value) and not (tmp_path / "no").exists()
+    if not shutil.which("gcc"):
+        pytest.skip("no gcc here")
+    p = subprocess.run([sys.executable, str(REPO / "benchmarks" / "pair_loop_c.py"), "--state", "S3 1 h", "--reps",
+                        "1", "--out", str(tmp_path)], capture_output=True, text=True, timeout=900)
+    assert p.returncode == 0, p.stderr[-2000:]
+    info = json.loads(p.stdout.strip().splitlines()[-1])
+    assert info["pairs_evaluated"] > 10000 and info["largest_force_pN"] > 0
+    assert info["relative_difference"] < 1e-4
+    assert (tmp_path / "pair_loop_c.csv").read_text().count("S3 1 h") == 1
