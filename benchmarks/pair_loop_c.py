@@ -10,7 +10,9 @@ The C loop is the same algorithm as taichimyxo/physics/terms/contacts.py `pair_p
 f32), the segments' closest-points test, then both sides' samples with the local nearest-segment rule, into s's row
 of pair_f. It reads the Taichi fields' values copied out once (positions, lists), so what it measures is the loop,
 not the copies. Both loops run in this process on the same state, alternating, --reps times each (best and median
-wall time), on --threads threads (Taichi's pool; OpenMP's, dynamic chunks of 64 segments, for C). The C result is
+wall time, and cores_busy: the process's CPU time over the wall time, how many threads were at work), on
+--threads threads (Taichi's pool; OpenMP's, dynamic chunks of 64 segments, its threads sleeping between calls
+as Taichi's do, for C). The C result is
 compared with Taichi's pair_f entry by entry (largest difference relative to the largest force): the C code is built
 without fast-math unless --fast-math (Taichi builds with it), so equal to rounding is the check, not bit for bit.
 Needs gcc with OpenMP.
@@ -21,6 +23,7 @@ import csv
 import ctypes
 import hashlib
 import json
+import os
 import subprocess
 import sys
 import tempfile
@@ -156,6 +159,8 @@ def c_library(fast_math: bool):
                            text=True)
         if p.returncode != 0:
             raise SystemExit(f"pair_loop_c: gcc failed (a C compiler with OpenMP is needed): {p.stderr.strip()[:300]}")
+    # OpenMP's threads sleep between calls as Taichi's pool's do: none spins through the other loop's calls
+    os.environ.setdefault("OMP_WAIT_POLICY", "passive")
     lib = ctypes.CDLL(str(so))
     d, i, f = ctypes.c_double, ctypes.c_int, ctypes.c_float
     ptr = np.ctypeslib.ndpointer
@@ -228,12 +233,14 @@ def main(argv=None) -> int:
         fn()
     ti.sync()
     walls = {k: [] for k in calls}
+    cpus = {k: 0.0 for k in calls}                        # the process's CPU time (all threads) per loop
     for _ in range(a.reps):                               # alternating, so a change of machine speed hits all
         for k, fn in calls.items():
-            t0 = time.perf_counter()
+            c0, t0 = time.process_time(), time.perf_counter()
             fn()
             ti.sync()
             walls[k].append(time.perf_counter() - t0)
+            cpus[k] += time.process_time() - c0
     info = {"state": a.state, "threads": a.threads, "fast_math": a.fast_math, "reps": a.reps,
             "pairs_evaluated": int(mask.sum()),
             "largest_force_pN": scale, "largest_difference_pN": diff, "relative_difference": diff / scale,
@@ -241,6 +248,7 @@ def main(argv=None) -> int:
     for k, w in walls.items():
         info[f"{k}_best_ms"] = round(1e3 * min(w), 4)
         info[f"{k}_median_ms"] = round(1e3 * float(np.median(w)), 4)
+        info[f"{k}_cores_busy"] = round(cpus[k] / sum(w), 2)          # CPU time / wall time: threads at work
     info["speedup_best"] = round(info["taichi_best_ms"] / info["c_best_ms"], 2)
     info["speedup_median"] = round(info["taichi_median_ms"] / info["c_median_ms"], 2)
     print(json.dumps(info))
