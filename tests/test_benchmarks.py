@@ -263,3 +263,14 @@ def test_pair_loop_c_gives_taichis_contact_forces_to_rounding_and_refuses_bad_ch
     assert info["pairs_evaluated"] > 10000 and info["largest_force_pN"] > 0
     assert info["relative_difference"] < 1e-4
     assert (tmp_path / "pair_loop_c.csv").read_text().count("S3 1 h") == 1
+
+
+def test_writers_cost_refuses_a_count_below_one_before_any_work(tmp_path, monkeypatch):
+    """benchmarks/writers_cost.py: --steps 0 is one line naming the options, before Taichi starts or a file is
+    written."""
+    mod = _benchmark("writers_cost")
+    monkeypatch.setattr(sys, "argv", ["writers_cost.py", "--state", "S3 6 h", "--steps", "0", "--out",
+                                      str(tmp_path / "no")])
+    with pytest.raises(SystemExit) as e:
+        mod.main()
+    assert "--steps" in str(e.value) and not (tmp_path / "no").exists()
