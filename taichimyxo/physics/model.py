@@ -69,7 +69,8 @@ class Model:
     def pairs(self):
         st = self.state
         ti.loop_config(**st.loops.items)
-        for s in range(st.n_s):
+        for i in range(st.n_s):
+            s = st.segment_of(i)                    # the threads' shares spread over the cells (launch.py)
             for u in ti.static(self.pair_terms):
                 u.pair_pass(s)
 

@@ -182,7 +182,8 @@ class NeighbourList:
             self.bin_items[k] = s
             self.bin_geo[k] = self._reach_geometry(s)
         ti.loop_config(**st.loops.items)
-        for s in range(st.n_s):
+        for i in range(st.n_s):
+            s = st.segment_of(i)                    # the threads' shares spread over the cells (launch.py)
             cs = s // (N - 1)
             ks = s % (N - 1)
             s_end = ks == 0 or ks == N - 2

@@ -13,7 +13,7 @@ import numpy as np
 import taichi as ti
 
 from ..io.frame import unwrap_chains
-from ..runtime.launch import LoopShape, shape_for
+from ..runtime.launch import LoopShape, shape_for, spread_stride
 from .geometry import SEGMENT_LENGTH_TOL  # noqa: F401,E402  (re-exported; defined where taichi is not imported)
 from .geometry import min_image as np_min_image
 
@@ -130,6 +130,7 @@ class State:
         self.fdt = ti.f64 if L.precision == "f64" else ti.f32
         self.loops = loops or shape_for(self.n_s)
         self.serial = self.loops.serial                     # loops over items in one thread (CPU, small systems)
+        self.stride = spread_stride(self.n_cells)           # cell_of's order
         self.x = self.vec(builder, self.n_p, self.pdt)            # positions, wrapped
         self.x_snap = self.vec(builder, self.n_p, self.pdt)       # positions at the start of the speed window
         self.ke = self.scalar(builder, self.n_cells, ti.i32)      # engine direction k_e = ±1
@@ -148,6 +149,21 @@ class State:
         return f
 
     # ------------------------------------------------------------------ layout, in kernels
+    @ti.func
+    def cell_of(self, i):
+        """The cell the i-th iteration of a loop over cells handles: i, or in the spread order of the CPU's parallel
+        loops (taichimyxo/runtime/launch.py) i * stride mod n_cells, every cell once."""
+        c = i
+        if ti.static(self.loops.spread):
+            c = ti.cast(ti.cast(i, ti.i64) * ti.static(self.stride) % ti.static(self.n_cells), ti.i32)
+        return c
+
+    @ti.func
+    def segment_of(self, i):
+        """The segment the i-th iteration of a loop over segments handles: cell_of's order, each cell's segments
+        together."""
+        return self.cell_of(i // (self.N - 1)) * (self.N - 1) + i % (self.N - 1)
+
     @ti.func
     def seg_ends(self, s):
         c = s // (self.N - 1)

@@ -19,6 +19,11 @@ the Simulation is built, so every choice is made at compile time and a kernel ho
        scan in one thread, each block's own scan in parallel); the implicit step keeps one partial per cell and sums
        them in a two-level reduction. Sums keep a fixed order (no atomics in any force or reduction), so a GPU run
        is reproducible from run to run; it differs from the CPU's by rounding (fast math, other groupings).
+  spread  on the CPU's parallel shape the heavy loops over cells and segments (the pair loop, the per-cell loop,
+       the neighbour search) visit the cells in a spread order, i -> i * stride mod n_cells (State.cell_of): the
+       threads' shares of such a loop follow the index range, and a late S3 holds more contacts in some part of it,
+       so in index order one thread idled for a third of each launch (docs/performance.md, "The threads' shares").
+       Each item's result does not depend on the order, so the numbers are the same.
 
 The shape follows the arch Taichi runs on (CUDA, Vulkan, Metal, ...: gpu), unless forced: the environment variable
 TAICHIMYXO_LOOP_SHAPE=cpu|gpu, or Simulation(..., loop_shape="gpu"). Forced to gpu on the CPU, the CPU compiles and
@@ -73,11 +78,25 @@ class LoopShape:
         """ti.loop_config keywords for a loop of one iteration, or a scan in one thread (any arch)."""
         return {"serialize": True}
 
+    @property
+    def spread(self) -> bool:
+        """Parallel loops over cells and segments visit the cells in a spread order (State.cell_of): the CPU's."""
+        return not self.gpu and not self.serial
+
     def cell_blocks(self, n_cells: int) -> int:
         """Blocks of cells whose partial sums the implicit step reduces in a fixed order."""
         if self.gpu:
             return n_cells
         return 1 if self.small else min(n_cells, CPU_MAX_BLOCKS)      # by size only: 1 and 2 threads sum alike
+
+
+def spread_stride(n: int) -> int:
+    """The stride of State.cell_of's order, i -> i * stride mod n: the integer nearest n (sqrt 5 - 1) / 2 that is
+    coprime with n (so the order visits every cell once), whose multiples spread evenly over the range."""
+    k = max(1, round(n * (math.sqrt(5.0) - 1.0) / 2.0))
+    while math.gcd(k, n) != 1:
+        k += 1
+    return k
 
 
 def scan_block(n: int) -> int:

@@ -34,7 +34,8 @@ class Explicit:
         N = ti.static(self.N)
         m.pairs()
         ti.loop_config(**st.loops.items)
-        for c in range(st.n_cells):
+        for i in range(st.n_cells):
+            c = st.cell_of(i)                       # the threads' shares spread over the cells (launch.py)
             x0, X, F, T, Fi = m.cell_forces(c)
             moved = 0
             dv = ti.cast(0.0, ti.f32)
