@@ -22,7 +22,7 @@ the Simulation is built, so every choice is made at compile time and a kernel ho
   spread  on the CPU's parallel shape the heavy loops over cells and segments (the pair loop, the per-cell loop,
        the neighbour search) visit the cells in a spread order, i -> i * stride mod n_cells (State.cell_of): the
        threads' shares of such a loop follow the index range, and a late S3 holds more contacts in some part of it,
-       so in index order one thread idled for a third of each launch (docs/performance.md, "The threads' shares").
+       so in index order one thread idles while the other finishes (docs/performance.md, "The threads' shares").
        Each item's result does not depend on the order, so the numbers are the same.
 
 The shape follows the arch Taichi runs on (CUDA, Vulkan, Metal, ...: gpu), unless forced: the environment variable
