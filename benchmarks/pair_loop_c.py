@@ -201,15 +201,15 @@ def main(argv=None) -> int:
     @ti.kernel
     def pairs_only():                 # the contacts' share of Model.pairs, as the step kernel launches it
         ti.loop_config(**st.loops.items)
-        for s in range(st.n_s):
-            con.pair_pass(s)
+        for i in range(st.n_s):
+            con.pair_pass(st.segment_of(i))
 
     def chunked(b):
         @ti.kernel
         def pairs_chunked():
             ti.loop_config(block_dim=b)
-            for s in range(st.n_s):
-                con.pair_pass(s)
+            for i in range(st.n_s):
+                con.pair_pass(st.segment_of(i))
         return pairs_chunked
 
     nl.rebuild()
