@@ -256,7 +256,10 @@ def main(argv=None) -> int:
         out_dir = Path(a.out)
         out_dir.mkdir(parents=True, exist_ok=True)
         path = out_dir / "pair_loop_c.csv"          # one row per call: the 1- and 2-thread runs side by side
-        rows = list(csv.DictReader(open(path))) if path.is_file() else []
+        rows = []
+        if path.is_file():
+            with open(path, newline="") as f:
+                rows = list(csv.DictReader(f))
         write_csv(path, rows + [info], cols=list(info))
     sim.close()
     return 0
